@@ -1,0 +1,113 @@
+"""Where work runs: an embedded LocalCluster by default, or an existing dask scheduler.
+
+The one place that decides.  ``--scheduler``, then ``buildingparser.scheduler``,
+then ``DASK_SCHEDULER_ADDRESS`` (dask's ``scheduler-address``) name an existing
+cluster (``tcp://`` or ``tls://``, security from dask's own ``distributed.comm.tls``
+settings); with none of them a LocalCluster is started with one single-threaded
+worker per core and the machine's memory shared among them.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import socket
+import sys
+from collections.abc import Iterator
+from urllib.parse import urlparse
+
+import dask
+from distributed import Client, LocalCluster
+
+from engine import config
+from tiles import paths
+from tiles.errors import UserError
+
+_LOOPBACK = {"localhost", "127.0.0.1", "::1", "", None}
+
+
+def scheduler_address(scheduler: str | None = None) -> str | None:
+    """The address of the existing cluster to use, or None for an embedded one."""
+    return scheduler or config.get("scheduler") or dask.config.get("scheduler-address", None) or None
+
+
+@contextlib.contextmanager
+def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None,
+                   threads_per_worker: int | None = None, memory_limit: str | int | None = None,
+                   quiet: bool = False) -> Iterator[Client]:
+    """A connected ``distributed.Client`` for the duration of a ``with`` block.
+
+    Parameters
+    ----------
+    scheduler
+        Address of an existing scheduler; None follows the settings above.
+    n_workers, threads_per_worker, memory_limit
+        Size of the embedded LocalCluster (ignored for an existing cluster).
+    quiet
+        Do not print the dashboard link.
+    """
+    address = scheduler_address(scheduler)
+    if address:
+        try:
+            client = Client(address, timeout=config.get("connect-timeout", "20s"))
+        except (OSError, TimeoutError) as exc:
+            raise UserError(address, f"cannot reach the dask scheduler ({type(exc).__name__}: {exc})") from None
+        cluster = None
+    else:
+        workers = n_workers or config.get("n-workers") or max(1, os.cpu_count() or 1)
+        cluster = LocalCluster(
+            n_workers=int(workers),
+            threads_per_worker=int(threads_per_worker or config.get("threads-per-worker") or 1),
+            memory_limit=memory_limit or config.get("memory-limit") or "auto",
+            processes=True,
+            dashboard_address=config.get("dashboard-address"),
+            silence_logs=logging.ERROR,
+        )
+        client = Client(cluster)
+    try:
+        if not quiet:
+            link = client.dashboard_link if _has_dashboard(client) else "(no dashboard)"
+            where = address or f"local cluster, {len(client.scheduler_info()['workers'])} workers"
+            print(f"dask: {where}; dashboard: {link}", file=sys.stderr)
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _has_dashboard(client: Client) -> bool:
+    try:
+        return bool(client.scheduler_info().get("services", {}).get("dashboard"))
+    except Exception:  # noqa: BLE001
+        return False
+
+
+def is_remote(client: Client | None) -> bool:
+    """True when the client's workers may run on other machines."""
+    if client is None:
+        return False
+    addr = client.scheduler.address if client.scheduler else ""
+    parsed = urlparse(addr)
+    if parsed.scheme == "inproc":
+        return False
+    host = parsed.hostname
+    return host not in _LOOPBACK and host != socket.gethostname() and host != _own_ip()
+
+
+def _own_ip() -> str | None:
+    try:
+        return socket.gethostbyname(socket.gethostname())
+    except OSError:
+        return None
+
+
+def check_reachable(client: Client | None, *locations: str) -> None:
+    """Refuse local paths when the workers are elsewhere and share no file system with us."""
+    if not is_remote(client) or config.get("shared-filesystem"):
+        return
+    for loc in locations:
+        if loc and paths.is_local(str(loc)):
+            raise UserError(loc, "a local path cannot be read by the workers of the remote cluster "
+                                 f"{client.scheduler.address}: use an fsspec URL (s3://, gs://...) or, if the "
+                                 "workers share this file system, set buildingparser.shared-filesystem: true")

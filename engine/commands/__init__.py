@@ -1,0 +1,1 @@
+"""One module per subcommand of ``buildingparser`` (see :mod:`engine.cli`)."""

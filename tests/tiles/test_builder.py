@@ -1,0 +1,97 @@
+"""The store builder: parts staged by tile, tiles written whole by one task each, nothing lost."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tiles.builder import StoreBuilder
+from tiles.errors import UserError
+from tiles.schema import Dimension, Part, Source, coordinate_dimensions
+from tiles.store import open_store
+from tiles.tasks import run_tasks
+
+
+def _cloud(n=50_000, seed=0):
+    rng = np.random.default_rng(seed)
+    xyz = rng.uniform([0, 0, 0], [37.0, 23.0, 3.0], size=(n, 3))
+    raw = np.round((xyz - [1000.0, 2000.0, 0.0] + [1000.0, 2000.0, 0.0]) / 0.001).astype(np.int32)
+    return {"x": raw[:, 0], "y": raw[:, 1], "z": raw[:, 2],
+            "intensity": rng.integers(0, 65535, n).astype(np.uint16),
+            "red": rng.integers(0, 255, n).astype(np.uint16)}
+
+
+DIMS = coordinate_dimensions() + [Dimension("intensity", "uint16", "las", las={"name": "intensity"}),
+                                  Dimension("red", "uint16", "las", las={"name": "red"})]
+
+
+def _stage(bounds, builder, cols):
+    return builder.write_part(bounds[0], {k: v[bounds[1]:bounds[2]] for k, v in cols.items()})
+
+
+def _build(path, cols, n_parts, client=None, tile_size=10.0):
+    n = len(cols["x"])
+    edges = np.linspace(0, n, n_parts + 1).astype(int)
+    parts = [Part(0, int(a), int(b - a)) for a, b in zip(edges[:-1], edges[1:])]
+    b = StoreBuilder.create(str(path), dimensions=DIMS, scale=[0.001] * 3, offset=[0.0, 0.0, 0.0],
+                            tile_size=tile_size)
+    jobs = [(k, int(a), int(b_)) for k, (a, b_) in enumerate(zip(edges[:-1], edges[1:]))]
+    summaries = run_tasks(_stage, jobs, client=client, extra_args=(b, cols))
+    return b.finalize(summaries, parts=parts, sources=[Source("mem", "test", n)], client=client)
+
+
+def _gather(store):
+    """All points back in input order, from the tiles."""
+    cols = {}
+    pieces = {c: [] for c in ("x", "y", "z", "intensity", "red", "point_index")}
+    for t in store.tiles:
+        for c, v in store.read(t, pieces).items():
+            pieces[c].append(v)
+    cols = {c: np.concatenate(v) for c, v in pieces.items()}
+    order = np.argsort(cols.pop("point_index"))
+    return {c: v[order] for c, v in cols.items()}
+
+
+def test_many_parts_on_cluster_equal_one_part(tmp_path, client):
+    cols = _cloud()
+    one = _build(tmp_path / "one.zarr", cols, 1)
+    many = _build(tmp_path / "many.zarr", cols, 13, client=client)
+    assert one.meta.point_count == many.meta.point_count == len(cols["x"])
+    assert [t.name for t in one.tiles] == [t.name for t in many.tiles]
+    for t1, t2 in zip(one.tiles, many.tiles):
+        a = one.read(t1, ["x", "y", "z", "intensity", "point_index"])
+        b = many.read(t2, ["x", "y", "z", "intensity", "point_index"])
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+    back = _gather(many)
+    for k in ("x", "y", "z", "intensity", "red"):
+        np.testing.assert_array_equal(back[k], cols[k])
+
+
+def test_tiles_hold_their_points_in_input_order(tmp_path):
+    cols = _cloud(20_000, seed=3)
+    store = _build(tmp_path / "s.zarr", cols, 4)
+    assert len(store.tiles) == 4 * 3  # 37 x 23 m at 10 m tiles
+    for t in store.tiles:
+        pi = store.read(t, ["point_index"])["point_index"]
+        assert np.all(np.diff(pi) > 0)
+        xyz = store.xyz(t, local=False)
+        assert np.all(np.floor(xyz[:, 0] / 10) == t.ix) and np.all(np.floor(xyz[:, 1] / 10) == t.iy)
+        offs = store.part_offsets(t)
+        assert offs[-1] == t.count and len(offs) == 5
+
+
+def test_existing_target_refused_and_nothing_left_on_failure(tmp_path):
+    cols = _cloud(1000)
+    _build(tmp_path / "s.zarr", cols, 1)
+    with pytest.raises(UserError, match="already exists"):
+        StoreBuilder.create(str(tmp_path / "s.zarr"), dimensions=DIMS, scale=[0.001] * 3, offset=[0, 0, 0])
+    b = StoreBuilder.create(str(tmp_path / "t.zarr"), dimensions=DIMS, scale=[0.001] * 3, offset=[0, 0, 0])
+    b.write_part(0, {k: v[:10] for k, v in cols.items()})
+    b.abort()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.zarr"]
+
+
+def test_unfinished_store_is_refused(tmp_path):
+    b = StoreBuilder.create(str(tmp_path / "t.zarr"), dimensions=DIMS, scale=[0.001] * 3, offset=[0, 0, 0])
+    with pytest.raises(UserError, match="incomplete"):
+        open_store(b.build_url)

@@ -1,0 +1,302 @@
+"""Building a tile store from parts, with every Zarr chunk written by exactly one task.
+
+Points arrive in *parts* (a range of an input file, a room of a generated
+building), each read by one task, and each part touches many tiles.  Writing
+them straight into the tiles would have several tasks write the same Zarr
+chunk, which silently loses data.  So building is a two-step external shuffle:
+
+1. :meth:`StoreBuilder.write_part` (one task per part) sorts the part's points
+   by tile, stably, and writes them to ``_staging/p<k>`` in the store being
+   built; it returns a :class:`PartSummary` (where each tile's run starts).
+2. :meth:`StoreBuilder.finalize` runs one task per tile that reads that tile's
+   run from every part, in part order, and writes the tile's arrays whole.
+   Then it writes the metadata document (``complete: true`` last), deletes the
+   staging area and renames the build into place.
+
+A store is built under a hidden temporary name next to its target and renamed
+at the end, so a failed build never leaves something that looks complete; on
+object stores (no rename) the ``complete`` flag written last plays that role.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from collections import defaultdict
+from dataclasses import dataclass, field
+from typing import Any
+
+import dask
+import numpy as np
+import zarr
+import zarr.codecs
+
+from tiles import paths
+from tiles.errors import UserError
+from tiles.schema import (META_KEY, POINT_INDEX, SCHEMA_VERSION, Dimension, Part, Source, StoreMeta,
+                          TileInfo)
+from tiles.store import TILE_CHUNK, TileStore, _open_group, tile_compressor, tile_name, utc_now
+from tiles.tasks import run_tasks
+
+STAGING_CHUNK = 1 << 16
+
+
+def default_tile_size() -> float:
+    """Tile edge in metres, from ``dask.config`` ``buildingparser.tiles.size``."""
+    return float(dask.config.get("buildingparser.tiles.size", 10.0))
+
+
+@dataclass
+class PartSummary:
+    """What one staged part holds: its point count and, per tile, its run and raw bounds."""
+
+    part_id: int
+    count: int
+    #: (ix, iy) -> (start, count, raw_min[3], raw_max[3]) of the part's run for that tile
+    tiles: dict[tuple[int, int], tuple[int, int, list[int], list[int]]] = field(default_factory=dict)
+    color_max: int | None = None
+
+
+class StoreBuilder:
+    """Writes a new tile store; send it to workers as a task argument (it pickles small).
+
+    Use :meth:`create`, then :meth:`write_part` once per part (any order, any
+    worker), then :meth:`finalize` once on the driver; :meth:`abort` on failure.
+    """
+
+    def __init__(self, url: str, build_url: str, *, dimensions: list[Dimension], scale: list[float],
+                 offset: list[float], tile_size: float, storage_options: dict[str, Any] | None = None,
+                 overwrite: bool = False):
+        self.url = url
+        self.build_url = build_url
+        self.dimensions = dimensions
+        self.scale = [float(s) for s in scale]
+        self.offset = [float(o) for o in offset]
+        self.tile_size = float(tile_size)
+        self.storage_options = storage_options
+        self.overwrite = overwrite
+
+    @classmethod
+    def create(cls, url: str, *, dimensions: list[Dimension], scale: list[float], offset: list[float],
+               tile_size: float | None = None, overwrite: bool = False,
+               storage_options: dict[str, Any] | None = None) -> "StoreBuilder":
+        """Start a build: check the target and create the temporary store.
+
+        ``dimensions`` are the stored per-point arrays except ``point_index``
+        (added here); ``x``, ``y``, ``z`` must be among them as int32 scaled
+        integers with the given ``scale`` and ``offset``.
+        """
+        url = paths.normalize(url)
+        tile_size = default_tile_size() if tile_size is None else float(tile_size)
+        if not (tile_size > 0 and math.isfinite(tile_size)):
+            raise UserError(url, f"tile size must be a positive number of metres, not {tile_size}")
+        names = [d.name for d in dimensions]
+        for needed in "xyz":
+            if needed not in names:
+                raise ValueError(f"dimensions lack {needed!r}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"duplicate dimension names in {names}")
+        if paths.exists(url, storage_options):
+            if not overwrite:
+                raise UserError(url, "already exists: choose another name or pass --overwrite")
+            if paths.is_local(url) and not _looks_like_store(url):
+                raise UserError(url, "exists and is not a tile store: refusing to overwrite it")
+        if paths.is_local(url):
+            parent = __import__("os").path.dirname(paths.local_path(url))
+            __import__("os").makedirs(parent, exist_ok=True)
+        elif overwrite:
+            paths.remove(url, storage_options)
+        build_url = paths.temporary_sibling(url)
+        dims = [d for d in dimensions if d.name != POINT_INDEX.name]
+        dims.insert(3 if len(dims) >= 3 else len(dims), POINT_INDEX)
+        root = _open_group(build_url, storage_options, mode="w")
+        root.attrs[META_KEY] = {"schema_version": SCHEMA_VERSION, "complete": False}
+        root.require_group("_staging")
+        root.require_group("tiles")
+        return cls(url, build_url, dimensions=dims, scale=scale, offset=offset, tile_size=tile_size,
+                   storage_options=storage_options, overwrite=overwrite)
+
+    # -- step 1: one task per part ------------------------------------------------------
+    @property
+    def stored_names(self) -> list[str]:
+        """The per-point arrays a part must provide (all but ``point_index``)."""
+        return [d.name for d in self.dimensions if d.name != POINT_INDEX.name]
+
+    def tile_keys(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tile indices of raw scaled-integer coordinates."""
+        ix = np.floor((x * self.scale[0] + self.offset[0]) / self.tile_size).astype(np.int64)
+        iy = np.floor((y * self.scale[1] + self.offset[1]) / self.tile_size).astype(np.int64)
+        return ix, iy
+
+    def write_part(self, part_id: int, columns: dict[str, np.ndarray]) -> PartSummary:
+        """Stage one part's points sorted by tile (stable); runs on a worker."""
+        missing = set(self.stored_names) - set(columns)
+        extra = set(columns) - set(self.stored_names)
+        if missing or extra:
+            raise ValueError(f"part {part_id}: missing {sorted(missing)}, unexpected {sorted(extra)}")
+        n = len(columns["x"])
+        if any(len(v) != n for v in columns.values()):
+            raise ValueError(f"part {part_id}: columns of different lengths")
+        summary = PartSummary(part_id, n)
+        if n == 0:
+            return summary
+        ix, iy = self.tile_keys(columns["x"], columns["y"])
+        x0, y0 = ix.min(), iy.min()
+        key = (ix - x0) * (iy.max() - y0 + 1) + (iy - y0)
+        order = np.argsort(key, kind="stable")
+        skey = key[order]
+        starts = np.flatnonzero(np.r_[True, skey[1:] != skey[:-1]])
+        counts = np.diff(np.r_[starts, n])
+        group = _open_group(paths.join(self.build_url, "_staging", f"p{part_id:07d}"),
+                            self.storage_options, mode="w")
+        sorted_cols: dict[str, np.ndarray] = {}
+        for d in self.dimensions:
+            if d.name == POINT_INDEX.name:
+                values = order.astype(np.int64)
+            else:
+                values = np.asarray(columns[d.name]).astype(d.dtype, copy=False)[order]
+            if d.name in ("x", "y", "z"):
+                sorted_cols[d.name] = values
+            _write_whole(group, d.name, values, staging=True)
+        mins = {a: np.minimum.reduceat(sorted_cols[a], starts) for a in "xyz"}
+        maxs = {a: np.maximum.reduceat(sorted_cols[a], starts) for a in "xyz"}
+        tix, tiy = ix[order[starts]], iy[order[starts]]
+        for j in range(len(starts)):
+            summary.tiles[(int(tix[j]), int(tiy[j]))] = (
+                int(starts[j]), int(counts[j]),
+                [int(mins[a][j]) for a in "xyz"], [int(maxs[a][j]) for a in "xyz"])
+        rgb = [c for c in ("red", "green", "blue") if c in columns]
+        if rgb:
+            summary.color_max = int(max(int(np.max(columns[c])) for c in rgb))
+        return summary
+
+    # -- step 2: one task per tile, then the metadata -------------------------------------
+    def finalize(self, summaries: list[PartSummary], *, parts: list[Part], sources: list[Source],
+                 client=None, crs: dict[str, Any] | None = None, las: dict[str, Any] | None = None,
+                 docs: dict[str, dict[str, Any]] | None = None) -> TileStore:
+        """Assemble the tiles from the staged parts and publish the store.
+
+        ``parts`` (in point order) must match the summaries one to one; the
+        stored point count is checked against the parts' counts.
+        """
+        summaries = sorted(summaries, key=lambda s: s.part_id)
+        if [s.part_id for s in summaries] != list(range(len(parts))):
+            raise ValueError("finalize: part summaries do not match the parts")
+        for s, p in zip(summaries, parts):
+            if s.count != p.count:
+                raise ValueError(f"part {s.part_id}: staged {s.count} points, expected {p.count}")
+        total = int(sum(s.count for s in summaries))
+        if total == 0:
+            raise UserError(sources[0].path if len(sources) == 1 else self.url, "empty point cloud: no points to store")
+        firsts = np.cumsum([0] + [s.count for s in summaries])[:-1].tolist()
+        runs: dict[tuple[int, int], list[tuple[int, int, int]]] = defaultdict(list)
+        lo: dict[tuple[int, int], np.ndarray] = {}
+        hi: dict[tuple[int, int], np.ndarray] = {}
+        for s in summaries:
+            for key, (start, count, mn, mx) in s.tiles.items():
+                runs[key].append((s.part_id, start, count))
+                lo[key] = np.minimum(lo.get(key, mn), mn)
+                hi[key] = np.maximum(hi.get(key, mx), mx)
+        keys = sorted(runs)
+        jobs = [(key, runs[key]) for key in keys]
+        counts = run_tasks(_build_tile, jobs, client=client, label="writing tiles",
+                           keys=[tile_name(*k) for k in keys], extra_args=(self, firsts, len(parts)))
+        if sum(counts) != total:
+            raise RuntimeError(f"tile build lost points: {sum(counts)} stored of {total}")
+        scale, offset = np.asarray(self.scale), np.asarray(self.offset)
+        tiles = []
+        for key, count in zip(keys, counts):
+            b = np.r_[lo[key] * scale + offset, hi[key] * scale + offset]
+            tiles.append(TileInfo(tile_name(*key), key[0], key[1], int(count), [float(v) for v in b]))
+        allb = np.array([t.bounds for t in tiles])
+        bounds = [float(v) for v in np.r_[allb[:, :3].min(0), allb[:, 3:].max(0)]]
+        cmax = [s.color_max for s in summaries if s.color_max is not None]
+        meta = StoreMeta(point_count=total, scale=self.scale, offset=self.offset, bounds=bounds,
+                         tile_size=self.tile_size, tiles=tiles, parts=parts, sources=sources,
+                         dimensions=self.dimensions, crs=crs,
+                         color_depth=(None if not cmax else (8 if max(cmax) <= 255 else 16)),
+                         las=las, created=utc_now(), software=_software(), complete=False)
+        root = _open_group(self.build_url, self.storage_options, mode="r+")
+        for name, doc in (docs or {}).items():
+            root.require_group(f"meta/{name}").attrs["doc"] = doc
+        paths.remove(paths.join(self.build_url, "_staging"), self.storage_options)
+        meta.complete = True
+        root.attrs[META_KEY] = meta.to_json()
+        if self.build_url != self.url:
+            if self.overwrite:
+                paths.remove(self.url, self.storage_options)
+            paths.publish(self.build_url, self.url)
+        return TileStore(self.url, self.storage_options)
+
+    def abort(self) -> None:
+        """Remove the unfinished build (never the target of a local build)."""
+        try:
+            paths.remove(self.build_url, self.storage_options)
+        except Exception as exc:  # noqa: BLE001 - cleanup must not hide the real error
+            warnings.warn(f"could not remove unfinished store {self.build_url}: {exc}", stacklevel=2)
+
+
+def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int]]], builder: StoreBuilder,
+                firsts: list[int], n_parts: int) -> int:
+    """One tile's task: gather its run from every part, in part order, and write it whole."""
+    key, runs = job
+    offsets = np.zeros(n_parts + 1, dtype=np.int64)
+    for part_id, _, count in runs:
+        offsets[part_id + 1] = count
+    offsets = np.cumsum(offsets)
+    tile = _open_group(paths.join(builder.build_url, "tiles", tile_name(*key)), builder.storage_options,
+                       mode="w")
+    n = 0
+    for d in builder.dimensions:
+        pieces = []
+        for part_id, start, count in runs:
+            a = zarr.open_array(_array_url(builder, part_id, d.name), **_kw(builder))[start:start + count]
+            if d.name == POINT_INDEX.name:
+                a = a + firsts[part_id]
+            pieces.append(a)
+        values = np.concatenate(pieces)
+        n = len(values)
+        _write_whole(tile, d.name, values, staging=False)
+    _write_whole(tile, "part_offsets", offsets, staging=False)
+    return n
+
+
+def _array_url(builder: StoreBuilder, part_id: int, name: str) -> str:
+    url = paths.join(builder.build_url, "_staging", f"p{part_id:07d}", name)
+    return paths.local_path(url) if paths.is_local(url) else url
+
+
+def _kw(builder: StoreBuilder) -> dict[str, Any]:
+    kw: dict[str, Any] = {"mode": "r", "zarr_format": 3}
+    if not paths.is_local(builder.build_url):
+        kw["storage_options"] = builder.storage_options
+    return kw
+
+
+def _write_whole(group: zarr.Group, name: str, values: np.ndarray, *, staging: bool) -> None:
+    """Create an array and write all of it from this one task."""
+    n = len(values)
+    if staging:
+        inner = STAGING_CHUNK
+        shard = max(inner, -(-n // inner) * inner)
+        arr = group.create_array(name, shape=(n,), dtype=values.dtype, chunks=(inner,), shards=(shard,),
+                                 compressors=zarr.codecs.BloscCodec(cname="lz4", clevel=1, shuffle="shuffle"))
+    else:
+        arr = group.create_array(name, shape=(n,), dtype=values.dtype, chunks=(min(TILE_CHUNK, max(n, 1)),),
+                                 compressors=tile_compressor())
+    if n:
+        arr[:] = values
+
+
+def _looks_like_store(url: str) -> bool:
+    import os
+
+    return os.path.isfile(os.path.join(paths.local_path(url), "zarr.json"))
+
+
+def _software() -> str:
+    try:
+        from importlib.metadata import version
+
+        return f"buildingparser {version('buildingparser')}"
+    except Exception:  # noqa: BLE001
+        return "buildingparser"

@@ -1,0 +1,19 @@
+"""The 13 S3DIS classes and their codes, used everywhere (tiles, LAS classification, models)."""
+from __future__ import annotations
+
+CLASS_NAMES: tuple[str, ...] = (
+    "ceiling", "floor", "wall", "beam", "column", "window", "door",
+    "table", "chair", "sofa", "bookcase", "board", "clutter",
+)
+CLASS_CODES: dict[str, int] = {name: code for code, name in enumerate(CLASS_NAMES)}
+CLUTTER = CLASS_CODES["clutter"]
+
+#: The 12 element classes that are detected and scored (clutter is not an element).
+ELEMENT_CLASSES: tuple[str, ...] = CLASS_NAMES[:12]
+STRUCTURAL_CLASSES: tuple[str, ...] = ("ceiling", "floor", "wall", "beam", "column", "window", "door")
+FURNITURE_CLASSES: tuple[str, ...] = ("table", "chair", "sofa", "bookcase", "board")
+
+
+def class_code(name: str) -> int:
+    """Code of a class name; names outside the 13 classes (e.g. ``stairs``) are clutter."""
+    return CLASS_CODES.get(name.strip().lower(), CLUTTER)
