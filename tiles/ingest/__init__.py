@@ -1,0 +1,276 @@
+"""Ingest point clouds into a tile store: LAS/LAZ, raw S3DIS folders, plain text, E57.
+
+:func:`ingest` opens every source on the driver (headers, layout: bad input is
+refused before any work starts), plans *parts* (ranges of points a task reads,
+see each reader), reads and stages the parts as dask tasks through
+:class:`tiles.builder.StoreBuilder`, and publishes the store.  Points stored
+always equal points read: the count of every source is checked against its
+header where it has one.
+
+Several sources go into one store, in the order given (their points get
+consecutive ``point_index`` values):
+
+* **dimensions**: the store holds the union of the sources' dimensions; points
+  of a source that lacks one get 0 (ground-truth arrays: -1, class clutter).  A
+  dimension of the same name must have the same meaning in every source (same
+  LAS field or extra-bytes record), integer widths are widened.
+* **coordinates**: one grid for the store: the finest scale of all sources
+  (LAS sources' own scales; 0.1 mm, ``buildingparser.ingest.scale``, for text,
+  S3DIS and E57) and the first LAS source's offset (or a round offset near the
+  first point).  A LAS file on another grid is moved onto it exactly when its
+  scale is a whole multiple of the store's and the offsets differ by whole
+  steps, else rounded (the largest error is reported).
+* **LAS flavour**: ``meta.las`` keeps the first LAS source's header facts and
+  records; the export point format is that source's when it holds every
+  standard dimension of the store, else the smallest format that holds most
+  (the rest are written as extra bytes).  Sources with different CRSs are
+  refused.
+"""
+from __future__ import annotations
+
+import os
+import time
+import warnings
+from collections.abc import Sequence
+from typing import Any
+
+import dask
+
+from tiles import paths
+from tiles.builder import StoreBuilder
+from tiles.errors import UserError
+from tiles.ingest._common import (DEFAULT_SCALE, Quantization, Reader, complete_columns, is_dir, offset_near,
+                                  union_dimensions)
+from tiles.schema import Part, Source
+from tiles.store import TileStore
+from tiles.tasks import run_tasks
+
+LAS_EXTENSIONS = (".las", ".laz")
+
+__all__ = ["ingest", "open_sources", "IngestReport"]
+
+
+def default_part_points() -> int:
+    """Points per ingest task, ``buildingparser.ingest.part-points``."""
+    return int(dask.config.get("buildingparser.ingest.part-points", 2_000_000))
+
+
+def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None = None) -> list[Reader]:
+    """A reader per source (an S3DIS folder of areas gives one per area), checked on the driver."""
+    from tiles.ingest.e57 import EXTENSIONS as E57_EXT
+    from tiles.ingest.text import EXTENSIONS as TEXT_EXT
+
+    readers: list[Reader] = []
+    for src in sources:
+        path = paths.normalize(src)
+        if is_dir(path, storage_options):
+            from tiles.ingest.s3dis import readers_for
+
+            readers.extend(readers_for(path, storage_options))
+            continue
+        lower = path.lower()
+        ext = os.path.splitext(lower)[1]
+        if ext in LAS_EXTENSIONS:
+            from tiles.ingest.las import LasReader
+
+            readers.append(LasReader(path, storage_options))
+        elif ext in TEXT_EXT:
+            from tiles.ingest.text import TextReader
+
+            readers.append(TextReader(path, storage_options))
+        elif ext in E57_EXT:
+            from tiles.ingest.e57 import E57Reader
+
+            readers.append(E57Reader(path, storage_options))
+        else:
+            if not paths.exists(path, storage_options):
+                raise UserError(path, "no such file or folder")
+            raise UserError(path, f"unknown extension {ext or '(none)'!r}: expected .las, .laz, "
+                                  + ", ".join(TEXT_EXT + E57_EXT) + " or an S3DIS folder")
+    if not readers:
+        raise UserError(None, "no input given")
+    return readers
+
+
+def choose_grid(readers: list[Reader]) -> Quantization:
+    """The store's coordinate grid (see the module doc)."""
+    from tiles.ingest.text import grid_scale
+
+    native = [g for g in (r.native_grid() for r in readers) if g is not None]
+    others = [r for r in readers if r.native_grid() is None]
+    scales = [g.scale for g in native] + ([(grid_scale(),) * 3] if others else [])
+    scale = tuple(min(s[i] for s in scales) for i in range(3))
+    if native:
+        offset = native[0].offset
+    else:
+        offset = offset_near(others[0].first_point())
+    return Quantization(scale, offset)  # type: ignore[arg-type]
+
+
+def merged_crs(readers: list[Reader]) -> dict[str, Any] | None:
+    """The one CRS of all sources (sources without a CRS do not count); a clear error if two differ."""
+    crs, first = None, None
+    for r in readers:
+        c = r.crs()
+        if c is None:
+            continue
+        if crs is None:
+            crs, first = c, r
+        elif _crs_key(c) != _crs_key(crs):
+            raise UserError(r.path, f"its coordinate reference system differs from the one of {first.path}: "
+                                    "reproject to one CRS first")
+    return crs
+
+
+def _crs_key(c: dict[str, Any]):
+    return (c.get("wkt"), c.get("epsg"), str((c.get("geotiff") or {}).get("keys")))
+
+
+def merged_las(readers: list[Reader], dims) -> dict[str, Any] | None:
+    """What export needs to write the LAS flavour back: the first LAS source's facts and the point format."""
+    from tiles.ingest.las import choose_point_format
+
+    facts = [r.las_facts() for r in readers if r.las_facts() is not None]
+    if not facts:
+        return None
+    las = dict(facts[0])
+    std = {(d.las or {}).get("name") for d in dims if d.kind == "las"}
+    las["source_point_format"] = las["point_format"]
+    las["point_format"] = choose_point_format(las["point_format"], {n for n in std if n})
+    if len({f["point_format"] for f in facts}) > 1:
+        las["mixed_point_formats"] = sorted({f["point_format"] for f in facts})
+    return las
+
+
+def _stage(item, builder: StoreBuilder, grid: Quantization):
+    """One task: read the parts of one spec and stage each; ``[(summary or None, stats), ...]``.
+
+    A spec that plans no parts (a check, such as counting S3DIS room file lines)
+    gives its facts with ``None`` for a summary.
+    """
+    first_part, reader, spec = item
+    expected = reader.parts_of(spec)
+    if expected == 0:
+        return [(None, res.stats) for res in reader.read(spec, grid)]
+    out = []
+    for k, res in enumerate(reader.read(spec, grid)):
+        n = len(res.columns["x"])
+        cols = complete_columns(res.columns, builder.dimensions, n)
+        out.append((builder.write_part(first_part + k, cols), res.stats))
+    if len(out) != expected:
+        raise RuntimeError(f"{reader.path}: read {len(out)} parts, planned {expected}")
+    return out
+
+
+class IngestReport(dict):
+    """What an ingest did: points, seconds, points per second, warnings (a dict, for printing or JSON)."""
+
+
+def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: bool = False,
+           tile_size: float | None = None, part_points: int | None = None,
+           storage_options: dict[str, Any] | None = None) -> TileStore:
+    """Read point clouds into a new tile store and return it.
+
+    Parameters
+    ----------
+    sources
+        Files or folders (local paths or fsspec URLs): ``.las``/``.laz``, text
+        (``.txt``, ``.xyz``, ``.pts``, ``.csv``, ``.asc``), ``.e57``, S3DIS folders.
+    store
+        Where to write the store (path or URL); refused if it exists unless ``overwrite``.
+    client
+        A ``distributed.Client``; None reads the parts one after another here.
+    tile_size
+        Tile edge in metres (default ``buildingparser.tiles.size``).
+    part_points
+        Points per task (default ``buildingparser.ingest.part-points``).
+    storage_options
+        fsspec options for URLs, for the sources and the store alike.
+
+    The report (points, seconds, warnings) is in ``store.ingest_report``.
+    """
+    t0 = time.perf_counter()
+    if isinstance(sources, (str, os.PathLike)):
+        sources = [os.fspath(sources)]
+    sources = [os.fspath(s) for s in sources]
+    if not sources:
+        raise UserError(None, "no input given")
+    part_points = default_part_points() if part_points is None else part_points
+    if not isinstance(part_points, int) or isinstance(part_points, bool) or part_points < 1:
+        raise UserError(None, f"part size must be a positive number of points, not {part_points!r}")
+    store = paths.normalize(store)
+    if store in {paths.normalize(s) for s in sources}:
+        raise UserError(store, "the store cannot be one of the inputs")
+    if paths.exists(store, storage_options) and not overwrite:
+        raise UserError(store, "already exists: choose another name or pass --overwrite")
+    readers = open_sources(sources, storage_options)
+    space, inst = 0, 0
+    for r in readers:
+        if hasattr(r, "set_id_base"):
+            r.set_id_base(space, inst)
+            space += r.space_count
+            inst += r.instance_count
+    dims = union_dimensions(readers)
+    grid = choose_grid(readers)
+    crs = merged_crs(readers)
+    las = merged_las(readers, dims)
+    builder = StoreBuilder.create(store, dimensions=dims, scale=list(grid.scale), offset=list(grid.offset),
+                                  tile_size=tile_size, overwrite=overwrite, storage_options=storage_options)
+    try:
+        items, owners, pid = [], [], 0
+        for si, r in enumerate(readers):
+            for spec in r.plan(part_points):
+                items.append((pid, r, spec))
+                owners.append(si)
+                pid += r.parts_of(spec)
+        results = run_tasks(_stage, items, client=client, label="reading parts",
+                            keys=[f"{os.path.basename(r.path)}#{k}" for k, (_, r, _) in enumerate(items)],
+                            extra_args=(builder, grid))
+        summaries, parts = [], []
+        counts = [0] * len(readers)
+        stats: list[list[dict]] = [[] for _ in readers]
+        for si, res in zip(owners, results):
+            for summary, st in res:
+                stats[si].append(st)
+                if summary is None:
+                    continue
+                parts.append(Part(si, counts[si], summary.count))
+                counts[si] += summary.count
+                summaries.append(summary)
+        for r, n in zip(readers, counts):
+            if r.expected_count is not None and n != r.expected_count:
+                raise UserError(r.path, f"read {n:,} points but the header counts {r.expected_count:,}")
+        infos = [r.source_info(st) for r, st in zip(readers, stats)]
+        srcs = [Source(r.path, r.format, n, info) for r, n, info in zip(readers, counts, infos)]
+        docs = _ground_truth_docs(readers, stats, grid)
+        result = builder.finalize(summaries, parts=parts, sources=srcs, client=client, crs=crs, las=las, docs=docs)
+    except BaseException:
+        builder.abort()
+        raise
+    notes = [w for r, info in zip(readers, infos) for w in r.warnings(info)]
+    for w in notes:
+        warnings.warn(w, stacklevel=2)
+    seconds = time.perf_counter() - t0
+    total = result.meta.point_count
+    result.ingest_report = IngestReport(points=total, seconds=seconds, points_per_second=total / max(seconds, 1e-9),
+                                        sources=len(readers), parts=len(parts), tiles=len(result.meta.tiles),
+                                        warnings=notes)
+    return result
+
+
+def _ground_truth_docs(readers, stats, grid) -> dict[str, Any]:
+    from tiles.groundtruth import DOC, make_doc
+
+    spaces, elements = [], []
+    for r, st in zip(readers, stats):
+        if hasattr(r, "ground_truth"):
+            s, e = r.ground_truth(st, grid)
+            spaces += s
+            elements += e
+    if not spaces and not elements:
+        return {}
+    return {DOC: make_doc(spaces, elements)}
+
+
+# re-exported for callers that want the default grid step of sources without one
+DEFAULT_TEXT_SCALE = DEFAULT_SCALE
