@@ -1,0 +1,231 @@
+"""Features of a 3D window (paper Table 1) from summed voxel moments.
+
+A window is a box of whole voxels ``[lo, hi)`` of a space's :class:`~engine.moments.VoxelGrid`
+(canonical frame, see :mod:`engine.canonical`), cut into ``K x K x K``
+sub-boxes; sub-box ``j`` along an axis of ``W`` voxels spans voxels
+``[lo + (j W) // K, lo + ((j + 1) W) // K)`` (:func:`sub_bounds`).  Its feature
+vector (:class:`FeatureLayout`) is::
+
+    global   position          P, min corner in the unit cube                      (3)
+             position_code     tent code of the window centre, 5 tents per axis    (15)
+             size              S, size in the unit cube                            (3)
+             size_code         tent code of S, 5 tents per axis                    (15)
+             metric_code       tent code of log2 of the size in metres, 6 per axis (18)
+    local, per sub-box l (x-major order), zero where l holds no points:
+             occupancy         B_l, 1 if l holds at least ``min_points`` points    (1)
+             ratio             d_l, points of l / points of the window, times K^3  (1)
+             color             mean r, g, b of l in [0, 1]                         (3)
+             normal            |n_x|, |n_y|, |n_z| of the smallest eigenvector     (3)
+             curvature         lambda_min / sum(lambda) of the covariance of l     (1)
+
+The tent codes are our addition: a linear SVM can only score a raw position
+or size monotonically (a wall sits at either end of an axis, a chair has a
+typical size), so each is also given as a piecewise-linear "soft one-hot"
+code (:func:`tent_code`).  The metric code carries the window's size in metres,
+which the unit cube discards and which tells a chair from a table whatever the
+room's size.  Normals enter as absolute components: their sign is arbitrary.
+The ratio is scaled by ``K^3`` so that it is about 1 for an even spread.
+
+All sums come from the integral volume of the space (:mod:`engine.moments`): a
+window's features cost a few hundred look-ups, independent of its points.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from engine import moments as mom
+
+#: Tent centres of the position and unit-size codes (unit cube).
+UNIT_TENTS = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: Tent centres of the metric size code, in metres (log2-spaced coding).
+METRIC_TENTS = (0.05, 0.15, 0.4, 1.0, 2.5, 6.0)
+GLOBAL_BLOCKS = (("position", 3), ("position_code", 3 * len(UNIT_TENTS)), ("size", 3),
+                 ("size_code", 3 * len(UNIT_TENTS)), ("metric_code", 3 * len(METRIC_TENTS)))
+LOCAL_BLOCKS = (("occupancy", 1), ("ratio", 1), ("color", 3), ("normal", 3), ("curvature", 1))
+LOCAL_SIZE = sum(n for _, n in LOCAL_BLOCKS)
+
+#: Feature groups removed by the ablations of paper section 5.3 (Table 3).
+ABLATIONS: dict[str, tuple[str, ...]] = {
+    "full": (),
+    "no_local": ("ratio", "normal", "curvature"),
+    "no_global": ("position", "position_code"),
+    "no_color": ("color",),
+}
+
+
+def tent_code(x: np.ndarray, centres) -> np.ndarray:
+    """Piecewise-linear code ``(..., len(centres))`` of ``x``: weights of the two nearest centres, summing to 1."""
+    c = np.asarray(centres, dtype=np.float64)
+    x = np.clip(np.asarray(x, dtype=np.float64), c[0], c[-1])
+    k = np.clip(np.searchsorted(c, x, side="right") - 1, 0, len(c) - 2)
+    t = (x - c[k]) / (c[k + 1] - c[k])
+    out = np.zeros(x.shape + (len(c),))
+    np.put_along_axis(out, k[..., None], (1.0 - t)[..., None], axis=-1)
+    np.put_along_axis(out, (k + 1)[..., None], t[..., None], axis=-1)
+    return out
+
+
+@dataclass
+class FeatureLayout:
+    """Where each feature group sits in the vector, and which groups a model uses.
+
+    Parameters
+    ----------
+    k
+        Sub-boxes per axis of a window (K).
+    disabled
+        Feature groups (names of ``GLOBAL_BLOCKS`` / ``LOCAL_BLOCKS``) that are zeroed (ablations).
+    min_points
+        Points a sub-box needs to count as occupied.
+    """
+
+    k: int = 4
+    disabled: tuple[str, ...] = ()
+    min_points: int = 1
+    spans: dict[str, list[tuple[int, int]]] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if int(self.k) < 1:
+            raise ValueError(f"K must be at least 1, got {self.k}")
+        self.k = int(self.k)
+        known = {n for n, _ in GLOBAL_BLOCKS} | {n for n, _ in LOCAL_BLOCKS}
+        bad = set(self.disabled) - known
+        if bad:
+            raise ValueError(f"unknown feature groups {sorted(bad)}; known: {sorted(known)}")
+        self.disabled = tuple(self.disabled)
+        spans: dict[str, list[tuple[int, int]]] = {}
+        i = 0
+        for name, n in GLOBAL_BLOCKS:
+            spans[name] = [(i, i + n)]
+            i += n
+        self.n_global = i
+        for name, _ in LOCAL_BLOCKS:
+            spans[name] = []
+        for _ in range(self.k ** 3):
+            for name, n in LOCAL_BLOCKS:
+                spans[name].append((i, i + n))
+                i += n
+        self.size = i
+        self.spans = spans
+
+    @property
+    def mask(self) -> np.ndarray:
+        """Bool ``(size,)``: the columns the model uses."""
+        m = np.ones(self.size, dtype=bool)
+        for name in self.disabled:
+            for a, b in self.spans[name]:
+                m[a:b] = False
+        return m
+
+    def to_json(self) -> dict[str, Any]:
+        return {"k": self.k, "disabled": list(self.disabled), "min_points": self.min_points, "size": self.size,
+                "global_blocks": [list(b) for b in GLOBAL_BLOCKS], "local_blocks": [list(b) for b in LOCAL_BLOCKS],
+                "unit_tents": list(UNIT_TENTS), "metric_tents": list(METRIC_TENTS),
+                "order": "global blocks, then for each sub-box (x-major: index = (i*K + j)*K + k) its local blocks"}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "FeatureLayout":
+        lay = cls(int(d["k"]), tuple(d.get("disabled", ())), int(d.get("min_points", 1)))
+        if "size" in d and int(d["size"]) != lay.size:
+            raise ValueError(f"feature layout of size {d['size']}, this version builds {lay.size}")
+        return lay
+
+
+def sub_bounds(width: np.ndarray, k: int) -> np.ndarray:
+    """Sub-box edges ``(..., k + 1)`` (voxel offsets from the window's corner) of windows ``width`` voxels wide."""
+    w = np.asarray(width, dtype=np.int64)
+    return (np.arange(k + 1) * w[..., None]) // k
+
+
+def global_features(position: np.ndarray, size: np.ndarray, metric_size: np.ndarray) -> np.ndarray:
+    """The global block ``(..., n_global)`` from unit-cube P, S and the size in metres (all ``(..., 3)``)."""
+    position = np.asarray(position, dtype=np.float64)
+    size = np.asarray(size, dtype=np.float64)
+    centre = position + size / 2.0
+    lead = position.shape[:-1]
+    parts = [position, tent_code(centre, UNIT_TENTS).reshape(*lead, -1), size,
+             tent_code(size, UNIT_TENTS).reshape(*lead, -1),
+             tent_code(np.log2(np.maximum(metric_size, 1e-6)), np.log2(METRIC_TENTS)).reshape(*lead, -1)]
+    return np.concatenate(parts, axis=-1)
+
+
+def local_features(sums: np.ndarray, n_window: np.ndarray, k: int, min_points: int = 1) -> np.ndarray:
+    """Local features ``(..., 9)`` of sub-boxes from their moment sums ``(..., 13)``.
+
+    ``n_window`` (broadcastable to ``sums[..., 0]``) is the point count of each
+    sub-box's window, for the ratio.  Sub-boxes with fewer than ``min_points``
+    points get all zeros; normal and curvature need 3 points.
+    """
+    n = sums[..., 0]
+    occ = n >= max(min_points, 1)
+    safe = np.where(n > 0, n, 1.0)
+    out = np.zeros(sums.shape[:-1] + (LOCAL_SIZE,))
+    out[..., 0] = occ
+    out[..., 1] = np.where(occ, n / np.maximum(n_window, 1.0) * k ** 3, 0.0)
+    out[..., 2:5] = np.where(occ[..., None], sums[..., 10:13] / safe[..., None], 0.0)
+    lam, total, vec = mom.smallest_eigen(mom.covariance(sums))
+    geo = occ & (n >= 3) & (total > 0)
+    out[..., 5:8] = np.where(geo[..., None], np.abs(vec), 0.0)
+    out[..., 8] = np.where(geo, lam / np.where(total > 0, total, 1.0), 0.0)
+    return out
+
+
+def window_features(iv: np.ndarray, grid: mom.VoxelGrid, lo: np.ndarray, hi: np.ndarray,
+                    layout: FeatureLayout, chunk: int = 4096) -> np.ndarray:
+    """Feature vectors ``(n, layout.size)`` of windows ``[lo, hi)`` (voxel indices ``(n, 3)``).
+
+    Used for training samples; :mod:`engine.sliding` computes the same scores for
+    all positions of a window shape at once without materialising the vectors.
+    """
+    lo = np.asarray(lo, dtype=np.int64).reshape(-1, 3)
+    hi = np.asarray(hi, dtype=np.int64).reshape(-1, 3)
+    k = layout.k
+    out = np.zeros((len(lo), layout.size), dtype=np.float64)
+    shape = np.asarray(grid.shape)
+    vox = grid.voxel
+    for s in range(0, len(lo), chunk):
+        l, h = lo[s:s + chunk], hi[s:s + chunk]
+        w = h - l
+        out[s:s + chunk, :layout.n_global] = global_features(l / shape, w / shape, w * vox)
+        b = sub_bounds(w, k)  # (m, 3, k+1)
+        starts = l[:, :, None] + b[:, :, :-1]
+        stops = l[:, :, None] + b[:, :, 1:]
+        # all K^3 sub-boxes, x-major
+        ix, iy, iz = np.meshgrid(np.arange(k), np.arange(k), np.arange(k), indexing="ij")
+        ix, iy, iz = ix.ravel(), iy.ravel(), iz.ravel()
+        slo = np.stack([starts[:, 0, ix], starts[:, 1, iy], starts[:, 2, iz]], axis=-1)  # (m, K^3, 3)
+        shi = np.stack([stops[:, 0, ix], stops[:, 1, iy], stops[:, 2, iz]], axis=-1)
+        sums = mom.box_sums(iv, slo, shi)  # (m, K^3, 13)
+        n_win = mom.box_sums(iv, l, h)[:, 0]
+        loc = local_features(sums, n_win[:, None], k, layout.min_points)
+        out[s:s + chunk, layout.n_global:] = loc.reshape(len(l), -1)
+    out[:, ~layout.mask] = 0.0
+    return out
+
+
+@dataclass
+class SpaceVolume:
+    """One space ready for windows: its canonical frame, voxel grid and integral volume of moments."""
+
+    frame: Any  # engine.canonical.CanonicalFrame
+    grid: mom.VoxelGrid
+    iv: np.ndarray
+    n_points: int
+
+    @classmethod
+    def build(cls, xyz: np.ndarray, rgb: np.ndarray | None, frame: Any, voxel: float,
+              max_cells: int) -> "SpaceVolume":
+        """Accumulate the moments of a space's points (``xyz`` in the frame's coordinates, ``rgb`` in [0, 1])."""
+        grid = mom.VoxelGrid.covering(frame.extent, voxel, max_cells)
+        m = mom.voxel_moments(frame.to_metric(xyz), rgb, grid)
+        return cls(frame, grid, mom.integral_volume(m), int(len(xyz)))
+
+    def voxel_box(self, position: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit-cube boxes ``(n, 3)`` snapped to voxel boxes ``[lo, hi)``, at least one voxel, inside the grid."""
+        shape = np.asarray(self.grid.shape)
+        lo = np.clip(np.round(np.asarray(position) * shape), 0, shape - 1).astype(np.int64)
+        hi = np.clip(np.round((np.asarray(position) + np.asarray(size)) * shape), 1, shape).astype(np.int64)
+        return lo, np.maximum(hi, lo + 1)

@@ -1,0 +1,1 @@
+"""Evaluation of the pipeline's results against ground truth (paper section 5)."""

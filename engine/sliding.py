@@ -1,0 +1,167 @@
+"""Sliding windows over a space's unit cube (paper section 4, "Semantic Element Proposal Generation").
+
+Every window of the dictionary is slid over the space's voxel grid: along each
+axis from the ``0`` face to the ``1`` face with a stride of ``stride`` times the
+window's size (at least one voxel), always including the position flush with
+the far face, so windows anchored at either face of the unit cube exist and a
+window as long as the space has exactly one position along that axis (walls,
+floor, ceiling).  The linear SVM score ``w . Phi + b`` of all positions of one
+window shape is computed at once (:func:`score_windows`):
+
+* a window's sub-boxes are products of per-axis voxel intervals; the distinct
+  intervals of all positions along each axis are collected, the moment sums of
+  all their products come from the integral volume in eight vectorised look-ups
+  (:func:`engine.moments.box_sums_grid`), and their local features are computed
+  once (shared by the overlapping windows);
+* each of the ``K^3`` sub-box slots then adds ``w_slot . features`` gathered
+  for all positions; the ratio feature is linear in the sub-box count, divided
+  by the window's count at the end; the global features are computed per
+  position.
+
+:func:`non_maximum_suppression` keeps, per class, the best windows that overlap
+a better one by at most ``nms_iou`` (3D IoU in the canonical frame).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine import moments as mom
+from engine.features import FeatureLayout, SpaceVolume, global_features, local_features, sub_bounds
+
+#: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
+SUBBOX_BATCH = 250_000
+
+
+def window_shape(metric_size: np.ndarray, grid: mom.VoxelGrid) -> np.ndarray:
+    """Voxels ``(3,)`` of a window of ``metric_size`` metres in ``grid`` (at least 1, at most the grid)."""
+    shape = np.asarray(grid.shape)
+    return np.clip(np.round(np.asarray(metric_size) / grid.voxel), 1, shape).astype(np.int64)
+
+
+def axis_positions(n: int, w: int, stride: float) -> np.ndarray:
+    """Window starts along one axis of ``n`` voxels for a window of ``w`` voxels: both faces included."""
+    step = max(1, int(round(w * stride)))
+    last = max(n - w, 0)
+    return np.unique(np.append(np.arange(0, last + 1, step), last)).astype(np.int64)
+
+
+def _intervals(pos: np.ndarray, w: int, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct sub-box intervals ``(u, 2)`` of all positions and, per position and slot, their index."""
+    b = sub_bounds(np.array(w), k)
+    iv = np.stack([pos[:, None] + b[None, :-1], pos[:, None] + b[None, 1:]], axis=-1).reshape(-1, 2)
+    uniq, inv = np.unique(iv, axis=0, return_inverse=True)
+    return uniq, inv.reshape(len(pos), k)
+
+
+@dataclass
+class WindowScores:
+    """Scores of one window shape at all its positions (``scores[i, j, k]`` at ``(px[i], py[j], pz[k])``)."""
+
+    shape: np.ndarray  # (3,) voxels
+    px: np.ndarray
+    py: np.ndarray
+    pz: np.ndarray
+    scores: np.ndarray  # (nx, ny, nz); -inf where the window holds too few points
+    counts: np.ndarray  # (nx, ny, nz) points in the window
+
+    def boxes(self, flat_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Voxel boxes ``[lo, hi)`` of positions given as flat indices into ``scores``."""
+        i, j, k = np.unravel_index(flat_index, self.scores.shape)
+        lo = np.stack([self.px[i], self.py[j], self.pz[k]], axis=-1)
+        return lo, lo + self.shape
+
+
+def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias: float,
+                  layout: FeatureLayout, stride: float, min_points: int = 10) -> WindowScores:
+    """The linear score of a window of ``shape`` voxels at every sliding position of a space.
+
+    Equal, to rounding, to ``window_features(...) @ weights + bias`` for each window
+    (tested); ``weights`` are the full layout's (masked groups are ignored).
+    """
+    k = layout.k
+    grid = vol.grid
+    n = np.asarray(grid.shape)
+    shape = np.minimum(np.asarray(shape, dtype=np.int64), n)
+    w = np.where(layout.mask, np.asarray(weights, dtype=np.float64), 0.0)
+    wg = w[:layout.n_global]
+    wl = w[layout.n_global:].reshape(k, k, k, -1)
+    px, py, pz = (axis_positions(int(n[a]), int(shape[a]), stride) for a in range(3))
+    ux, ix = _intervals(px, int(shape[0]), k)
+    uy, iy = _intervals(py, int(shape[1]), k)
+    uz, iz = _intervals(pz, int(shape[2]), k)
+    # window counts and global part
+    win = lambda p, s: np.stack([p, p + s], axis=1)  # noqa: E731
+    counts = mom.box_sums_grid(vol.iv[..., :1], win(px, shape[0]), win(py, shape[1]), win(pz, shape[2]))[..., 0]
+    gx, gy, gz = np.meshgrid(px, py, pz, indexing="ij")
+    lo = np.stack([gx, gy, gz], axis=-1)
+    size = np.broadcast_to(shape, lo.shape)
+    scores = global_features(lo / n, size / n, size * grid.voxel) @ wg + float(bias)
+    ratio_acc = np.zeros_like(scores)
+    # local part, in batches of x positions so that the sub-box table stays bounded
+    per_x = max(1, SUBBOX_BATCH // max(len(uy) * len(uz), 1))
+    wl_noratio = wl.copy()
+    wl_noratio[..., 1] = 0.0
+    for s in range(0, len(px), per_x):
+        sl = slice(s, s + per_x)
+        need, sub_ix = np.unique(ix[sl], return_inverse=True)
+        sub_ix = sub_ix.reshape(ix[sl].shape)
+        sums = mom.box_sums_grid(vol.iv, ux[need], uy, uz)
+        feats = local_features(sums, np.ones(sums.shape[:-1]), k, layout.min_points)
+        feats[..., 1] = np.where(feats[..., 0] > 0, sums[..., 0], 0.0)  # raw count: ratio = count / window count
+        for a in range(k):
+            for b in range(k):
+                for c in range(k):
+                    f = feats[np.ix_(sub_ix[:, a], iy[:, b], iz[:, c])]
+                    scores[sl] += f @ wl_noratio[a, b, c]
+                    ratio_acc[sl] += f[..., 1] * wl[a, b, c, 1]
+    scores += ratio_acc / np.maximum(counts, 1.0) * k ** 3
+    scores = np.where(counts >= min_points, scores, -np.inf)
+    return WindowScores(shape, px, py, pz, scores, counts)
+
+
+def box_iou(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.ndarray) -> np.ndarray:
+    """IoU ``(n, m)`` of axis-aligned boxes ``[lo, hi)`` (any units)."""
+    lo_a, hi_a = np.asarray(lo_a, float).reshape(-1, 3), np.asarray(hi_a, float).reshape(-1, 3)
+    lo_b, hi_b = np.asarray(lo_b, float).reshape(-1, 3), np.asarray(hi_b, float).reshape(-1, 3)
+    ov = np.clip(np.minimum(hi_a[:, None], hi_b[None]) - np.maximum(lo_a[:, None], lo_b[None]), 0, None)
+    inter = ov.prod(axis=2)
+    va, vb = (hi_a - lo_a).prod(axis=1), (hi_b - lo_b).prod(axis=1)
+    union = va[:, None] + vb[None] - inter
+    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
+
+
+def grid_iou(shape: np.ndarray, px: np.ndarray, py: np.ndarray, pz: np.ndarray, lo: np.ndarray,
+             hi: np.ndarray) -> np.ndarray:
+    """IoU ``(nx, ny, nz)`` of a window of ``shape`` voxels at every position with one box ``[lo, hi)``.
+
+    Voxel units (the box may have fractional corners); the intersection is separable per axis.
+    """
+    def overlap(p, w, a):
+        return np.clip(np.minimum(p + w, hi[a]) - np.maximum(p, lo[a]), 0, None).astype(np.float64)
+
+    ox, oy, oz = (overlap(p, shape[a], a) for a, p in enumerate((px, py, pz)))
+    inter = ox[:, None, None] * oy[None, :, None] * oz[None, None, :]
+    union = float(np.prod(shape)) + float(np.prod(np.asarray(hi) - np.asarray(lo))) - inter
+    return inter / union
+
+
+def non_maximum_suppression(lo: np.ndarray, hi: np.ndarray, scores: np.ndarray, iou: float,
+                            max_keep: int) -> np.ndarray:
+    """Indices of the kept boxes, best first: greedy NMS on 3D IoU."""
+    order = np.lexsort((np.arange(len(scores)), -scores))
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    vol = (hi - lo).prod(axis=1)
+    alive = np.ones(len(scores), dtype=bool)
+    keep: list[int] = []
+    for i in order:
+        if not alive[i]:
+            continue
+        keep.append(int(i))
+        if len(keep) >= max_keep:
+            break
+        ov = np.clip(np.minimum(hi, hi[i]) - np.maximum(lo, lo[i]), 0, None).prod(axis=1)
+        alive &= ov / (vol + vol[i] - ov) <= iou
+        alive[i] = False
+    return np.asarray(keep, dtype=np.int64)

@@ -1,0 +1,432 @@
+"""Training the element detectors (paper section 4, "Learning to Detect Elements").
+
+Training runs over any number of tile stores with ground truth, one dask task
+per ground-truth space in every pass (a space's points gathered from the tiles
+it touches), and only small arrays come back to the driver:
+
+1. **Instances** (one pass): each space's canonical frame (the same function as
+   at run time), the canonical box of each of its ground-truth elements (the
+   ``meta/ground_truth`` box, bounded in the frame) and its occupancy pattern
+   (K^3 sub-boxes holding points of the instance).
+2. **Dictionary**: Affinity Propagation per class (:mod:`engine.dictionary`).
+3. **First samples** (one pass): positives are the ground-truth windows of the
+   class and up to ``jitter-positives`` sliding windows per element overlapping it
+   by ``pos-iou`` or more; negatives are the ground-truth windows of the other
+   classes and ``random-negatives`` random sliding windows of the class's
+   shapes overlapping no element of the class by ``neg-iou`` or more.
+4. **Linear SVMs**: one ``LinearSVC`` (liblinear) per class on the layout's columns.
+5. **Hard negatives** (bounded rounds): every space is scanned with the current
+   detectors; windows overlapping no element of the class by ``neg-iou`` and
+   scoring above -1 (margin violators) that are not yet negatives are sampled
+   (seeded, ``hard-negatives`` per class and space) and the classes that got new
+   ones are retrained, until no class gets any or ``rounds`` is reached.
+
+Folds are buildings: :func:`cross_validate` trains on all buildings but one and
+evaluates on that one, for each, so no building is both trained and tested on.
+Everything random is seeded (``seed``): a run is reproducible.
+"""
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.svm import LinearSVC
+
+from engine import config
+from engine import moments as mom
+from engine.detection import DetectionSettings, prepare_space, space_frame
+from engine.dictionary import WindowDictionary
+from engine.features import FeatureLayout, SpaceVolume, window_features
+from engine.model import Model
+from engine.sliding import axis_positions, grid_iou, score_windows, window_shape
+from engine.spacedata import SpaceRef, index_spaces, load_space
+from tiles.classes import ELEMENT_CLASSES
+from tiles.errors import UserError
+from tiles.groundtruth import DOC as GT_DOC
+from tiles.tasks import run_tasks
+
+N_CLASSES = len(ELEMENT_CLASSES)
+#: Elements with fewer points than this in their space are not used for training.
+MIN_INSTANCE_POINTS = 10
+
+
+@dataclass
+class TrainSettings:
+    """Training settings (``buildingparser.detection.train.*`` and the model's grid settings)."""
+
+    k: int = 4
+    voxel: float = 0.1
+    max_cells: int = 2_000_000
+    c: float = 0.05
+    rounds: int = 3
+    pos_iou: float = 0.6
+    neg_iou: float = 0.4
+    jitter_positives: int = 4
+    random_negatives: int = 40
+    hard_negatives: int = 60
+    max_negatives: int = 30000
+    seed: int = 0
+    preference_quantile: float = 0.5
+    max_atoms: int = 10
+    max_instances: int = 400
+    iou_weight: float = 0.5
+    disabled: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
+            raise ValueError("k, voxel and max-cells must be positive")
+        if self.c <= 0:
+            raise ValueError("the SVM's C must be positive")
+        if not 0 < self.neg_iou <= self.pos_iou <= 1:
+            raise ValueError("need 0 < neg-iou <= pos-iou <= 1")
+        if self.rounds < 0 or min(self.jitter_positives, self.random_negatives, self.hard_negatives) < 0:
+            raise ValueError("rounds and sample counts must be >= 0")
+        self.disabled = tuple(self.disabled)
+
+    @classmethod
+    def from_config(cls, **overrides: Any) -> "TrainSettings":
+        kw: dict[str, Any] = {}
+        for f in fields(cls):
+            if f.name == "disabled":
+                continue
+            key = f.name.replace("_", "-")
+            v = config.get(f"detection.{key}") if f.name in ("k", "voxel", "max_cells") else \
+                config.get(f"detection.train.{key}")
+            if v is not None:
+                kw[f.name] = type(f.default)(v)
+        kw.update(overrides)
+        return cls(**kw)
+
+    def to_json(self) -> dict[str, Any]:
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v) for f in fields(self)}
+
+
+@dataclass
+class TrainJob:
+    """One ground-truth space of one training store."""
+
+    store: Any
+    ref: SpaceRef
+    elements: list[dict[str, Any]]
+    key: int
+    building: str
+
+
+@dataclass
+class Samples:
+    """Training vectors of one class: positives, negatives and the keys of the mined windows."""
+
+    pos: list[np.ndarray] = field(default_factory=list)
+    neg: list[np.ndarray] = field(default_factory=list)
+    keys: set[tuple[int, int]] = field(default_factory=set)
+
+    def n_neg(self) -> int:
+        return int(sum(len(x) for x in self.neg))
+
+
+# -- jobs -----------------------------------------------------------------------------------
+
+def training_jobs(stores: list[Any], *, client=None, building_names: list[str] | None = None) -> list[TrainJob]:
+    """One job per ground-truth space of every store (stores need ``gt_space`` and ``meta/ground_truth``)."""
+    jobs: list[TrainJob] = []
+    for si, store in enumerate(stores):
+        doc = store.doc(GT_DOC)
+        if not doc or store.meta.dimension("gt_space") is None:
+            raise UserError(store.url, "no ground truth (gt_space and the meta/ground_truth document) to train on")
+        by_space: dict[int, list[dict[str, Any]]] = {}
+        for e in doc.get("elements", []):
+            if 0 <= int(e["class_code"]) < N_CLASSES:
+                by_space.setdefault(int(e["space"]), []).append(e)
+        name = building_names[si] if building_names else store.url
+        for ref in index_spaces(store, "gt_space", client=client, min_points=50):
+            jobs.append(TrainJob(store, ref, by_space.get(ref.space_id, []), len(jobs), name))
+    return jobs
+
+
+def _canonical_gt(job: TrainJob, vol: SpaceVolume, gt_instance: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The elements of a space as canonical boxes (metres), with their point counts."""
+    origin = np.asarray(job.store.meta.origin, dtype=np.float64)
+    f = vol.frame
+    lo, hi, cls, ids = [], [], [], []
+    for e in job.elements:
+        p, s = f.world_box_to_unit(np.asarray(e["center"]) - origin, e["size"], float(e.get("yaw", 0.0)))
+        a = np.clip(p * f.extent, 0, f.extent)
+        b = np.clip((p + s) * f.extent, 0, f.extent)
+        if np.any(b - a <= 1e-6):
+            continue
+        lo.append(a), hi.append(b), cls.append(int(e["class_code"])), ids.append(int(e["id"]))
+    ids_a = np.asarray(ids, dtype=np.int64)
+    counts = np.zeros(len(ids), dtype=np.int64)
+    if gt_instance is not None and len(ids):
+        u, c = np.unique(gt_instance, return_counts=True)
+        lookup = dict(zip(u.tolist(), c.tolist()))
+        counts = np.array([lookup.get(i, 0) for i in ids], dtype=np.int64)
+    return {"lo": np.asarray(lo, dtype=np.float64).reshape(-1, 3), "hi": np.asarray(hi, dtype=np.float64).reshape(-1, 3),
+            "cls": np.asarray(cls, dtype=np.int64), "id": ids_a, "points": counts}
+
+
+def _occupancy(metric: np.ndarray, lo: np.ndarray, hi: np.ndarray, k: int, min_points: int) -> np.ndarray:
+    """K^3 occupancy pattern of points inside the box ``[lo, hi]`` (canonical metres)."""
+    rel = (metric - lo) / np.maximum(hi - lo, 1e-9)
+    inside = np.all((rel >= 0) & (rel <= 1), axis=1)
+    idx = np.clip((rel[inside] * k).astype(np.int64), 0, k - 1)
+    cnt = np.bincount(np.ravel_multi_index(idx.T, (k, k, k)), minlength=k ** 3) if len(idx) else np.zeros(k ** 3)
+    return (cnt >= max(min_points, 1)).reshape(k, k, k)
+
+
+def _instances_task(job: TrainJob, settings: TrainSettings) -> dict[str, np.ndarray]:
+    """Pass 1: the canonical boxes and occupancy patterns of a space's elements."""
+    pts = load_space(job.store, job.ref, "gt_space", truth=True)
+    frame = space_frame(pts)
+    metric = frame.to_metric(pts.xyz)
+    vol = SpaceVolume(frame, mom.VoxelGrid.covering(frame.extent, settings.voxel, settings.max_cells),
+                      np.zeros((1, 1, 1, 1)), len(pts.xyz))
+    gt = _canonical_gt(job, vol, pts.gt_instance)
+    keep = gt["points"] >= MIN_INSTANCE_POINTS
+    k = settings.k
+    occ = np.zeros((int(keep.sum()), k, k, k), dtype=bool)
+    for j, i in enumerate(np.nonzero(keep)[0]):
+        own = pts.gt_instance == gt["id"][i]
+        occ[j] = _occupancy(metric[own], gt["lo"][i], gt["hi"][i], k, 1)
+    size = gt["hi"][keep] - gt["lo"][keep]
+    return {"cls": gt["cls"][keep], "metric_size": size, "unit_size": size / frame.extent, "occupancy": occ}
+
+
+# -- samples ----------------------------------------------------------------------------------
+
+def _rng(*key: int) -> np.random.Generator:
+    return np.random.default_rng([int(k) & 0x7FFFFFFF for k in key])
+
+
+def _window_key(atom: int, lo: np.ndarray) -> np.ndarray:
+    lo = np.asarray(lo, dtype=np.int64).reshape(-1, 3)
+    return (np.int64(atom) << 48) | (lo[:, 0] << 32) | (lo[:, 1] << 16) | lo[:, 2]
+
+
+def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: int,
+                  det: DetectionSettings) -> dict[int, dict[str, np.ndarray]]:
+    """Pass 2+: feature vectors of positives and negatives of every class in one space.
+
+    Round 0: ground-truth windows, jittered positives, other classes' elements and
+    random negatives.  Later rounds: margin violators of the current detectors.
+    """
+    pts = load_space(job.store, job.ref, "gt_space", truth=True)
+    vol = prepare_space(pts, model)
+    gt = _canonical_gt(job, vol, pts.gt_instance)
+    usable = gt["points"] >= MIN_INSTANCE_POINTS
+    vox = vol.grid.voxel
+    gt_lo_v, gt_hi_v = gt["lo"] / vox, gt["hi"] / vox
+    lay = model.layout
+    out: dict[int, dict[str, list]] = {c: {"pos": [], "neg": [], "keys": []} for c in range(N_CLASSES)}
+    if round_ == 0 and usable.any():
+        lo, hi = vol.voxel_box(gt["lo"][usable] / vol.frame.extent,
+                               (gt["hi"][usable] - gt["lo"][usable]) / vol.frame.extent)
+        feats = window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32)
+        cls = gt["cls"][usable]
+        for c in range(N_CLASSES):
+            out[c]["pos"].append(feats[cls == c])
+            out[c]["neg"].append(feats[cls != c])
+    for c in range(N_CLASSES):
+        if round_ > 0 and not model.trained[c]:
+            continue
+        mine = gt["cls"] == c
+        rng = _rng(settings.seed, round_, job.key, c)
+        cand_lo, cand_hi, cand_keys, pos_lo, pos_hi = [], [], [], [], []
+        for ai, atom in enumerate(model.dictionary.atoms_):
+            if atom.class_code != c:
+                continue
+            shape = window_shape(atom.size_in(vol.grid.extent), vol.grid)
+            if round_ == 0:
+                px, py, pz = (axis_positions(int(vol.grid.shape[a]), int(shape[a]), det.stride) for a in range(3))
+                counts = mom.box_sums_grid(vol.iv[..., :1], np.stack([px, px + shape[0]], 1),
+                                           np.stack([py, py + shape[1]], 1), np.stack([pz, pz + shape[2]], 1))[..., 0]
+                valid = counts >= det.min_window_points
+            else:
+                ws = score_windows(vol, shape, model.weights[c], model.bias[c], lay, det.stride, det.min_window_points)
+                px, py, pz = ws.px, ws.py, ws.pz
+                valid = ws.scores > -1.0
+            best = np.zeros(valid.shape)
+            for g in np.nonzero(mine)[0]:
+                iou = grid_iou(shape, px, py, pz, gt_lo_v[g], gt_hi_v[g])
+                best = np.maximum(best, iou)
+                if round_ == 0 and usable[g] and settings.jitter_positives:
+                    good = np.nonzero((iou >= settings.pos_iou).ravel() & valid.ravel())[0]
+                    if len(good):
+                        pick = rng.choice(good, min(len(good), settings.jitter_positives), replace=False)
+                        i, j, k = np.unravel_index(pick, valid.shape)
+                        l = np.stack([px[i], py[j], pz[k]], axis=1)
+                        pos_lo.append(l), pos_hi.append(l + shape)
+            neg = np.nonzero((valid & (best < settings.neg_iou)).ravel())[0]
+            if len(neg):
+                i, j, k = np.unravel_index(neg, valid.shape)
+                l = np.stack([px[i], py[j], pz[k]], axis=1)
+                cand_lo.append(l), cand_hi.append(l + shape), cand_keys.append(_window_key(ai, l))
+        if pos_lo:
+            lo, hi = np.concatenate(pos_lo), np.concatenate(pos_hi)
+            out[c]["pos"].append(window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32))
+        if cand_lo:
+            lo, hi, keys = np.concatenate(cand_lo), np.concatenate(cand_hi), np.concatenate(cand_keys)
+            n = settings.random_negatives if round_ == 0 else settings.hard_negatives
+            if len(lo) > n:
+                pick = np.sort(rng.choice(len(lo), n, replace=False))
+                lo, hi, keys = lo[pick], hi[pick], keys[pick]
+            if len(lo):
+                out[c]["neg"].append(window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32))
+                out[c]["keys"].append(keys)
+    d = lay.size
+    return {c: {"pos": np.concatenate(v["pos"]) if v["pos"] else np.zeros((0, d), np.float32),
+                "neg": np.concatenate(v["neg"]) if v["neg"] else np.zeros((0, d), np.float32),
+                "keys": np.concatenate(v["keys"]) if v["keys"] else np.zeros(0, np.int64)}
+            for c, v in out.items()}
+
+
+def _fit_svm(pos: np.ndarray, neg: np.ndarray, mask: np.ndarray, c: float, seed: int) -> tuple[np.ndarray, float]:
+    """One linear SVM on the layout's active columns; returns full-layout weights and bias."""
+    x = np.concatenate([pos, neg])[:, mask].astype(np.float64)
+    y = np.concatenate([np.ones(len(pos)), -np.ones(len(neg))])
+    svm = LinearSVC(C=c, class_weight="balanced", loss="squared_hinge", dual="auto", max_iter=5000,
+                    random_state=seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        svm.fit(x, y)
+    w = np.zeros(len(mask))
+    w[mask] = svm.coef_[0]
+    return w, float(svm.intercept_[0])
+
+
+# -- training ---------------------------------------------------------------------------------
+
+def train(stores: list[Any], *, client=None, settings: TrainSettings | None = None,
+          detection: DetectionSettings | None = None, provenance: dict[str, Any] | None = None,
+          jobs: list[TrainJob] | None = None, log=None) -> Model:
+    """Train a model on ground-truth spaces of ``stores`` (or on the given ``jobs``).
+
+    Parameters
+    ----------
+    stores
+        Tile stores with ground truth (``gt_space``, ``gt_instance``, ``meta/ground_truth``).
+    client
+        A ``distributed.Client``; every pass runs one task per space.
+    settings, detection
+        Training and sliding-window settings (default: ``buildingparser.detection.*``).
+    provenance
+        Extra facts stored in the model (data sources, seeds...).
+    jobs
+        Precomputed :func:`training_jobs` (a subset for cross-validation).
+    log
+        A callable taking one line of progress, or None.
+    """
+    settings = settings or TrainSettings.from_config()
+    det = detection or DetectionSettings.from_config()
+    say = log or (lambda s: None)
+    t0 = time.perf_counter()
+    jobs = jobs if jobs is not None else training_jobs(stores, client=client)
+    if not jobs:
+        raise UserError(None, "no ground-truth spaces to train on")
+    layout = FeatureLayout(settings.k, settings.disabled)
+    inst = run_tasks(_instances_task, jobs, client=client, label="training instances",
+                     keys=[f"space {j.key}" for j in jobs], extra_args=(settings,))
+    cls = np.concatenate([r["cls"] for r in inst])
+    say(f"{len(jobs)} spaces, {len(cls)} element instances")
+    dictionary = WindowDictionary(settings.k, iou_weight=settings.iou_weight,
+                                  preference_quantile=settings.preference_quantile,
+                                  max_instances=settings.max_instances, max_atoms=settings.max_atoms,
+                                  random_state=settings.seed)
+    dictionary.fit(cls, np.concatenate([r["unit_size"] for r in inst]),
+                   np.concatenate([r["metric_size"] for r in inst]),
+                   np.concatenate([r["occupancy"] for r in inst]))
+    say(f"dictionary: {len(dictionary.atoms_)} windows "
+        f"({', '.join(f'{ELEMENT_CLASSES[c]} {len(dictionary.atoms_of(c))}' for c in range(N_CLASSES))})")
+    trained = np.array([len(dictionary.atoms_of(c)) > 0 for c in range(N_CLASSES)])
+    model = Model(layout, dictionary, np.zeros((N_CLASSES, layout.size)), np.zeros(N_CLASSES), trained,
+                  voxel=settings.voxel, max_cells=settings.max_cells, stride=det.stride)
+    samples = {c: Samples() for c in range(N_CLASSES)}
+    mask = layout.mask
+    history = []
+    for round_ in range(settings.rounds + 1):
+        res = run_tasks(_samples_task, jobs, client=client, label=f"training samples, round {round_}",
+                        keys=[f"space {j.key}" for j in jobs], extra_args=(model, settings, round_, det))
+        new = np.zeros(N_CLASSES, dtype=np.int64)
+        for job, r in zip(jobs, res):
+            for c in range(N_CLASSES):
+                s = samples[c]
+                if len(r[c]["pos"]):
+                    s.pos.append(r[c]["pos"])
+                neg, keys = r[c]["neg"], r[c]["keys"]
+                if round_ == 0 and len(neg) > len(keys):  # other classes' elements come first, keyless
+                    s.neg.append(neg[:len(neg) - len(keys)])
+                    neg = neg[len(neg) - len(keys):]
+                fresh = [i for i, kk in enumerate(keys.tolist()) if (job.key, kk) not in s.keys]
+                if fresh and s.n_neg() < settings.max_negatives:
+                    s.keys.update((job.key, keys[i]) for i in fresh)
+                    s.neg.append(neg[fresh])
+                    new[c] += len(fresh)
+        weights, bias = model.weights.copy(), model.bias.copy()
+        for c in range(N_CLASSES):
+            s = samples[c]
+            if not trained[c]:
+                continue
+            pos = np.concatenate(s.pos) if s.pos else np.zeros((0, layout.size), np.float32)
+            neg = np.concatenate(s.neg) if s.neg else np.zeros((0, layout.size), np.float32)
+            if not len(pos) or not len(neg):
+                trained[c] = False
+                continue
+            if round_ == 0 or new[c]:
+                weights[c], bias[c] = _fit_svm(pos, neg, mask, settings.c, settings.seed)
+        model = Model(layout, dictionary, weights, bias, trained, voxel=settings.voxel,
+                      max_cells=settings.max_cells, stride=det.stride)
+        history.append({"round": round_, "new_negatives": new.tolist(),
+                        "positives": [int(sum(len(x) for x in samples[c].pos)) for c in range(N_CLASSES)],
+                        "negatives": [samples[c].n_neg() for c in range(N_CLASSES)]})
+        say(f"round {round_}: new negatives {new.tolist()}")
+        if round_ > 0 and not new.any():
+            break
+    model.detection = det.to_json()
+    model.svm = {"estimator": "sklearn.svm.LinearSVC (liblinear)", "C": settings.c, "class_weight": "balanced",
+                 "loss": "squared_hinge", "settings": settings.to_json(), "rounds": history}
+    model.provenance = dict(provenance or {})
+    model.provenance.update({"spaces": len(jobs), "instances": int(len(cls)),
+                             "buildings": sorted({j.building for j in jobs}),
+                             "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)},
+                             "seconds": round(time.perf_counter() - t0, 1), "trained_at": _now()})
+    return model
+
+
+def _now() -> str:
+    import datetime as _dt
+
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def evaluate_on(store: Any, model: Model, *, client=None, space_array: str = "gt_space",
+                detection: DetectionSettings | None = None):
+    """Detect on ``store`` (ground-truth or parsed spaces) and score against its ground truth."""
+    from engine.detection import detect
+    from engine.metrics.detection import evaluate_detections
+
+    props = detect(store, model=model, client=client, space_array=space_array, settings=detection)
+    doc = store.doc(GT_DOC) or {}
+    return evaluate_detections(props, doc.get("elements", []), client=client), props
+
+
+def cross_validate(stores: list[Any], *, client=None, settings: TrainSettings | None = None,
+                   detection: DetectionSettings | None = None, log=None) -> dict[str, Any]:
+    """Building-wise folds: train without one building, evaluate on it (ground-truth spaces), for each.
+
+    Returns ``{"folds": [{"building", "ap": {...}, "mean_ap", ...}], "mean_ap": mean over folds}``.
+    """
+    if len(stores) < 2:
+        raise UserError(None, "cross-validation needs at least two buildings (stores)")
+    say = log or (lambda s: None)
+    folds = []
+    for i, test in enumerate(stores):
+        train_stores = [s for j, s in enumerate(stores) if j != i]
+        say(f"fold {i + 1}/{len(stores)}: test on {test.url}")
+        model = train(train_stores, client=client, settings=settings, detection=detection, log=log)
+        ev, _ = evaluate_on(test, model, client=client, detection=detection)
+        folds.append({"building": test.url, **ev.to_json()})
+    return {"folds": folds, "mean_ap": float(np.nanmean([f["mean_ap"] for f in folds]))}
