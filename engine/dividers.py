@@ -1,0 +1,316 @@
+"""Peak-gap-peak space dividers on a 1-D density histogram (paper section 3.1.1).
+
+A space divider (a wall, a floor slab) shows in the histogram of point
+coordinates along an axis as *two peaks with a void between them*: the two
+scanned faces and the unscanned inside.  It is found by template matching with
+a bank of peak-gap-peak filters, max-pooling over the bank, non-maximum
+suppression and a scale-free threshold.
+
+The filter (paper): ``g_{δ,c}(s) = 1/(2c)·Π_{δ/2+c}(s) − 1/(2c)·Π_{δ/2}(s)`` with
+pass width ``c`` (each margin) and stop width ``δ`` (the gap).  Written as it is
+the formula is the mean density of the two margins only, which answers a lone
+strong peak (a bookcase face) as well as a wall.  We keep its two margins but
+take the *weaker* margin and subtract the gap, which makes it a true
+peak-gap-peak detector::
+
+    L, R, G = mean density of the left margin, right margin, gap    (points per bin)
+    r_{δ,c}(s) = min(L, R) − G
+
+Responses are computed for every position and every ``(δ, c)`` with cumulative
+sums, max-pooled over ``(δ, c)`` and suppressed to local maxima at least
+``min_spacing`` apart.  A maximum is a divider when three scale-free tests hold
+(so the same dividers come out at any point density):
+
+* contrast: ``G ≤ (1 − min_contrast) · min(L, R)`` (the gap is empty next to its margins);
+* void: ``G ≤ max_void_ratio_full · min(I_L, I_R)`` where ``I_L``, ``I_R`` are the
+  median densities of ``room_window`` metres beyond each margin.  Inside a room
+  the floor and ceiling make the histogram never drop far below the room's
+  level, so a gap much emptier than the rooms on both sides is a cut through
+  floor and ceiling: a wall, not an aisle between two bookcases nor a beam
+  (whose bottom face and the floor below fill its gap).  Door jambs and
+  thresholds fill a wall's gap in part, so when the histogram of the *upper
+  band* (points above door height) is given, the strict test
+  ``G_up ≤ max_void_ratio · min(I_L_up, I_R_up)`` is made there, where a wall
+  is solid over its doors and a room's ceiling is continuous;
+* evidence: the gap would hold at least ``min_gap_points`` points at the weaker
+  margin's density (too few points say nothing; this is a count, not a density).
+
+Separately, runs of empty bins at least ``empty_run`` long are *empty voids*:
+nothing at all was scanned there, so they separate whatever lies on each side
+(and trim the ends of a histogram).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+
+@dataclass(frozen=True)
+class DividerParams:
+    """Physical parameters (metres) of the divider search along one kind of axis.
+
+    The defaults are for walls seen along a horizontal axis: real walls are
+    0.10-0.35 m thick; the stop widths span 0.06-0.50 m to leave a margin for
+    thin partitions and thick masonry.  See :func:`vertical_params` for slabs.
+    """
+
+    #: Histogram resolution.
+    bin_width: float = 0.02
+    #: Smallest and largest stop width δ (void thickness) and the number of widths between
+    #: them (geometric progression).
+    stop_min: float = 0.06
+    stop_max: float = 0.50
+    stop_steps: int = 10
+    #: Pass widths c (width of each margin): from a crisp scanned face to a smeared one.
+    pass_widths: tuple[float, ...] = (0.04, 0.08, 0.16, 0.32)
+    #: The gap may hold at most ``1 - min_contrast`` of the weaker margin's density.
+    min_contrast: float = 0.6
+    #: In the upper band (above doors) the gap may hold at most this fraction of the room level
+    #: on each side ...
+    max_void_ratio: float = 0.35
+    #: ... and over all heights at most this fraction (door jambs and thresholds fill a gap in part).
+    max_void_ratio_full: float = 0.75
+    #: Width of the window beyond each margin whose median density is the room level there.
+    room_window: float = 1.0
+    #: Two dividers are never closer than this (non-maximum suppression radius).
+    min_spacing: float = 0.5
+    #: The gap would hold at least this many points at the weaker margin's density.
+    min_gap_points: float = 20.0
+    #: A run of empty bins at least this long separates what lies on its two sides.
+    empty_run: float = 0.6
+
+    def bank(self) -> np.ndarray:
+        """The filter bank as ``(k, 2)`` integer ``(δ, c)`` in bins, δ ≥ 1, c ≥ 1, no duplicates."""
+        b = self.bin_width
+        stops = np.geomspace(self.stop_min, self.stop_max, max(int(self.stop_steps), 1))
+        ds = np.unique(np.maximum(1, np.round(stops / b).astype(int)))
+        cs = np.unique(np.maximum(1, np.round(np.asarray(self.pass_widths, float) / b).astype(int)))
+        return np.array([(d, c) for d in ds for c in cs], dtype=np.int64)
+
+    def bins(self, metres: float) -> int:
+        """A length in whole bins (at least one)."""
+        return max(1, int(round(metres / self.bin_width)))
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["pass_widths"] = list(d["pass_widths"])
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "DividerParams":
+        known = {f.name for f in dataclasses.fields(cls)}
+        d = {k.replace("-", "_"): v for k, v in d.items()}
+        d = {k: v for k, v in d.items() if k in known}
+        if "pass_widths" in d:
+            d["pass_widths"] = tuple(float(v) for v in d["pass_widths"])
+        return cls(**d)
+
+
+def vertical_params(**overrides: Any) -> DividerParams:
+    """Defaults for storey dividers along z: the void between a ceiling and the next floor.
+
+    A bare slab is 0.15-0.4 m; with a suspended ceiling and the unscanned plenum
+    above it the void reaches 1.5 m and more, hence stop widths of 0.10-2.0 m.
+    """
+    base = dict(stop_min=0.10, stop_max=2.0, stop_steps=14, pass_widths=(0.04, 0.08, 0.16, 0.32),
+                min_spacing=1.5, empty_run=2.5)
+    base.update(overrides)
+    return DividerParams(**base)
+
+
+@dataclass
+class Divider:
+    """One divider found in a histogram (positions in the histogram's own coordinate, metres)."""
+
+    position: float  # centre of the gap
+    width: float  # stop width δ of the best filter
+    margin: float  # pass width c of the best filter
+    score: float  # (min(L, R) - G) / room level: how far the margins stand above the gap, in room levels
+    contrast: float  # 1 - G / min(L, R)
+    void_ratio: float  # G / min(I_L, I_R)
+    cut: int  # bin edge (index into the histogram) where the axis is cut
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: (float(v) if isinstance(v, (float, np.floating)) else int(v))
+                for k, v in dataclasses.asdict(self).items()}
+
+
+@dataclass
+class BankResponse:
+    """Responses of a filter bank on a half-bin grid of gap centres.
+
+    Row ``k`` is filter ``bank[k]``; column ``j`` is the gap centre ``j / 2`` bins
+    from the start of the histogram.  ``left``, ``right``, ``gap`` are the mean
+    densities (points per bin) of the two margins and the gap; positions where the
+    filter does not fit inside the histogram hold ``-inf`` responses.
+    """
+
+    bank: np.ndarray
+    response: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    gap: np.ndarray
+
+
+def bank_responses(hist: np.ndarray, bank: np.ndarray) -> BankResponse:
+    """Convolve the histogram with every peak-gap-peak filter of the bank (via cumulative sums)."""
+    h = np.asarray(hist, dtype=np.float64)
+    n = len(h)
+    m = 2 * n + 1
+    cs = np.concatenate(([0.0], np.cumsum(h)))
+    k = len(bank)
+    resp = np.full((k, m), -np.inf)
+    left = np.zeros((k, m))
+    right = np.zeros((k, m))
+    gap = np.zeros((k, m))
+    for row, (d, c) in enumerate(bank):
+        # gap = bins [i, i + d), margins [i - c, i) and [i + d, i + d + c), all inside [0, n)
+        i = np.arange(c, n - d - c + 1)
+        if len(i) == 0:
+            continue
+        lm = (cs[i] - cs[i - c]) / c
+        rm = (cs[i + d + c] - cs[i + d]) / c
+        gm = (cs[i + d] - cs[i]) / d
+        j = 2 * i + d
+        resp[row, j] = np.minimum(lm, rm) - gm
+        left[row, j], right[row, j], gap[row, j] = lm, rm, gm
+    return BankResponse(np.asarray(bank), resp, left, right, gap)
+
+
+def max_pool(br: BankResponse) -> tuple[np.ndarray, np.ndarray]:
+    """Max-pooling over the bank: the best response per position and the filter giving it."""
+    best = np.argmax(br.response, axis=0)
+    return br.response[best, np.arange(br.response.shape[1])], best
+
+
+def non_maximum_suppression(score: np.ndarray, radius: int, valid: np.ndarray | None = None) -> np.ndarray:
+    """Indices of positions that are the best valid score within ``radius`` positions (greedy, stable).
+
+    Candidates are the local maxima of the valid scores; they are taken in
+    decreasing score (ties: lower index first) and each suppresses every other
+    candidate closer than or at ``radius``.
+    """
+    s = np.where(np.ones_like(score, bool) if valid is None else valid, score, -np.inf)
+    finite = np.isfinite(s)
+    if not finite.any():
+        return np.zeros(0, dtype=np.int64)
+    filled = np.where(finite, s, np.nanmin(s[finite]) - 1.0)
+    local = ndimage.maximum_filter1d(filled, size=2 * radius + 1, mode="nearest")
+    cand = np.flatnonzero(finite & (filled >= local))
+    order = cand[np.lexsort((cand, -s[cand]))]
+    kept: list[int] = []
+    for j in order:
+        if all(abs(int(j) - q) > radius for q in kept):
+            kept.append(int(j))
+    return np.array(sorted(kept), dtype=np.int64)
+
+
+def empty_runs(hist: np.ndarray, min_bins: int) -> list[tuple[int, int]]:
+    """Runs ``[a, b)`` of empty bins at least ``min_bins`` long (including runs at the two ends)."""
+    empty = np.asarray(hist) <= 0
+    if not empty.any():
+        return []
+    edges = np.diff(np.concatenate(([0], empty.astype(np.int8), [0])))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= min_bins]
+
+
+def occupied_extent(hist: np.ndarray) -> tuple[int, int] | None:
+    """``[first, last + 1)`` of the non-empty bins, None if all are empty."""
+    nz = np.flatnonzero(np.asarray(hist) > 0)
+    if len(nz) == 0:
+        return None
+    return int(nz[0]), int(nz[-1]) + 1
+
+
+def _room_level(h: np.ndarray, lo: int, hi: int) -> float:
+    lo, hi = max(lo, 0), min(hi, len(h))
+    return float(np.median(h[lo:hi])) if hi > lo else np.nan
+
+
+def detect_dividers(hist: np.ndarray, params: DividerParams | None = None, *, start: float = 0.0,
+                    upper: np.ndarray | None = None) -> list[Divider]:
+    """The peak-gap-peak dividers of a density histogram, in increasing position.
+
+    Parameters
+    ----------
+    hist
+        Point counts per bin of width ``params.bin_width`` (all heights).
+    params
+        The physical parameters (defaults: walls along a horizontal axis).
+    start
+        Coordinate (metres) of the histogram's first bin edge; positions are reported in it.
+    upper
+        Optional counts of the same bins for the points of the *upper band* only
+        (above door height, see :mod:`engine.slicing`).  When given and the band
+        holds enough points beside a candidate, the void test is made in the band
+        (``max_void_ratio``), where a wall is solid over its doors and a room's
+        ceiling is continuous, and the all-heights gap must only stay below
+        ``max_void_ratio_full`` of the room level; otherwise the all-heights gap
+        must stay below ``max_void_ratio_full``.
+    """
+    p = params or DividerParams()
+    h = np.asarray(hist, dtype=np.float64)
+    n = len(h)
+    if n < 3:
+        return []
+    bank = p.bank()
+    br = bank_responses(h, bank)
+    pooled, best = max_pool(br)
+    cols = np.arange(len(pooled))
+    lm, rm, gm = br.left[best, cols], br.right[best, cols], br.gap[best, cols]
+    weaker = np.minimum(lm, rm)
+    d, c = bank[best, 0], bank[best, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        contrast = np.where(weaker > 0, 1.0 - gm / weaker, -np.inf)
+    ok = np.isfinite(pooled) & (pooled > 0) & (contrast >= p.min_contrast) & (weaker * d >= p.min_gap_points)
+    # candidates: local maxima (over a few bins) of the pooled response that pass the contrast and
+    # evidence tests; then the void test at each; then suppression at the physical spacing
+    cand = non_maximum_suppression(pooled, 2, ok)
+    up = None if upper is None else np.asarray(upper, dtype=np.float64)
+    ucs = None if up is None else np.concatenate(([0.0], np.cumsum(up)))
+    wb = p.bins(p.room_window)
+    keep = np.zeros(len(pooled), dtype=bool)
+    level = np.full(len(pooled), np.nan)
+    ratio = np.full(len(pooled), np.nan)
+    for j in cand:
+        dj, cj = int(d[j]), int(c[j])
+        i = (int(j) - dj) // 2  # gap start bin
+        lv = _side_levels(h, i, dj, cj, wb)
+        if lv is None or lv <= 0:
+            continue
+        full_ratio = gm[j] / lv
+        if full_ratio > p.max_void_ratio_full:
+            continue
+        r = full_ratio
+        if up is not None:
+            ulv = _side_levels(up, i, dj, cj, wb, both=True)
+            if ulv is not None and ulv * dj >= p.min_gap_points:
+                r = (ucs[i + dj] - ucs[i]) / dj / ulv
+                if r > p.max_void_ratio:
+                    continue
+        keep[j], level[j], ratio[j] = True, lv, r
+    out: list[Divider] = []
+    for j in non_maximum_suppression(pooled, 2 * p.bins(p.min_spacing), keep):
+        out.append(Divider(position=float(start + 0.5 * j * p.bin_width), width=int(d[j]) * p.bin_width,
+                           margin=int(c[j]) * p.bin_width, score=float(pooled[j] / level[j]),
+                           contrast=float(contrast[j]), void_ratio=float(ratio[j]),
+                           cut=int((int(j) + 1) // 2)))
+    return out
+
+
+def _side_levels(h: np.ndarray, i: int, d: int, c: int, wb: int, both: bool = False) -> float | None:
+    """The room level beside a gap ``[i, i + d)`` with margins ``c``: the lower of the two sides' medians.
+
+    A side cut off by the end of the histogram is ignored unless ``both`` is
+    required; None when no side can be measured.
+    """
+    levels = [_room_level(h, i - c - wb, i - c), _room_level(h, i + d + c, i + d + c + wb)]
+    known = [v for v in levels if np.isfinite(v)]
+    if not known or (both and len(known) < 2):
+        return None
+    return min(known)

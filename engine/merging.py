@@ -1,0 +1,248 @@
+"""Merging the over-segmented cells into spaces (paper section 3.1.2).
+
+The neighbour graph has one node per cell and one edge per pair of cells of a
+storey that share a face at least ``min_face`` long (a cell ends where the
+other begins along one axis and their ranges overlap along the other).  Each
+edge is tested for a divider *across its face, restricted to the face's
+overlap*: the histogram along the face's normal of the points of the two cells
+whose other coordinate lies in the overlap, within ``window`` metres of the
+face.  All edges' histograms come from ONE pass over the tiles
+(:func:`engine.histograms.edge_histograms`) and each edge's test is a task.
+
+An edge keeps the two cells apart when the same peak-gap-peak filter finds a
+divider whose void contains the face (``|position - face| <= width / 2 +
+margin``), or when an empty run at least ``empty_run`` long touches the face
+(nothing connects the two sides).  The connected components of the surviving
+edges are the spaces.
+
+Cells that cannot be a space on their own are then absorbed, smallest first,
+into the neighbouring space with the longest shared face without a divider (if
+they have none, with a divider): spaces of less than ``min_space_area`` m², or
+narrower than ``min_space_width`` m (slivers between two nearby cuts), or with
+fewer points per m² than ``min_relative_density`` times the median space.
+A weak space with no neighbour at all is noise beyond the building: its points
+get no space (-1).
+"""
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.sparse import coo_array
+from scipy.sparse.csgraph import connected_components
+
+from engine.dividers import DividerParams, detect_dividers, empty_runs
+from engine.histograms import BoxIndex, EdgeTables, Grid, accumulate, edge_histograms
+from engine.slicing import Box
+from tiles.tasks import run_tasks
+
+
+@dataclass
+class Edge:
+    """Two cells of a storey sharing a face: ``a`` below, ``b`` above along ``axis`` at bin ``position``."""
+
+    a: int
+    b: int
+    floor: int
+    axis: int  # 0: the face is normal to u; 1: normal to v
+    position: int
+    overlap: tuple[int, int]  # bins along the other axis
+    divider: dict[str, Any] | None = None
+    tested: bool = False
+
+    @property
+    def length_bins(self) -> int:
+        return self.overlap[1] - self.overlap[0]
+
+
+def neighbour_edges(cells: list[Box], min_face_bins: int) -> list[Edge]:
+    """All pairs of cells of a storey that share a face at least ``min_face_bins`` long."""
+    edges: list[Edge] = []
+    for axis in (0, 1):
+        ends: dict[tuple[int, int], list[int]] = defaultdict(list)
+        starts: dict[tuple[int, int], list[int]] = defaultdict(list)
+        for i, c in enumerate(cells):
+            lo, hi = c.range(axis)
+            ends[(c.floor, hi)].append(i)
+            starts[(c.floor, lo)].append(i)
+        for key in sorted(ends):
+            if key not in starts:
+                continue
+            for i in ends[key]:
+                oi = cells[i].range(1 - axis)
+                for j in starts[key]:
+                    oj = cells[j].range(1 - axis)
+                    o0, o1 = max(oi[0], oj[0]), min(oi[1], oj[1])
+                    if o1 - o0 >= min_face_bins:
+                        edges.append(Edge(i, j, key[0], axis, key[1], (o0, o1)))
+    return edges
+
+
+def build_edge_tables(index: BoxIndex, cells: list[Box], edges: list[Edge], window: int) -> EdgeTables:
+    """Per storey block of the cells' arrangement, the edge on each of its four sides."""
+    tables = [np.full((t.shape[0], t.shape[1], 4), -1, dtype=np.int64) for t in index.table]
+    for e_id, e in enumerate(edges):
+        f = e.floor
+        ub, vb = index.ub[f], index.vb[f]
+        along, other = (ub, vb) if e.axis == 0 else (vb, ub)
+        o0, o1 = np.searchsorted(other, e.overlap[0]), np.searchsorted(other, e.overlap[1])
+        for cell, side in ((e.a, 2 * e.axis + 1), (e.b, 2 * e.axis)):
+            lo, hi = cells[cell].range(e.axis)
+            a0, a1 = np.searchsorted(along, lo), np.searchsorted(along, hi)
+            if e.axis == 0:
+                tables[f][a0:a1, o0:o1, side] = e_id
+            else:
+                tables[f][o0:o1, a0:a1, side] = e_id
+    return EdgeTables(tables, np.array([e.axis for e in edges], dtype=np.int64),
+                      np.array([e.position for e in edges], dtype=np.int64), window)
+
+
+def face_divider(hist: np.ndarray, support: tuple[int, int], position: int, window: int,
+                 params: DividerParams, upper: np.ndarray | None = None) -> dict[str, Any] | None:
+    """The divider across a face, if any: a peak-gap-peak void containing it, or an empty run touching it.
+
+    ``hist`` covers bins ``position - window ... position + window``; only
+    ``support`` (the two cells' extent) is looked at; ``upper`` is the same for
+    the upper band.
+    """
+    s0, s1 = support
+    h = np.asarray(hist)[s0:s1]
+    up = None if upper is None else np.asarray(upper)[s0:s1]
+    first = position - window + s0  # global bin of h[0]
+    bw = params.bin_width
+    face = position * bw
+    rel = window - s0  # index of the face in h
+    for r0, r1 in empty_runs(h, params.bins(params.empty_run)):
+        if r0 <= rel <= r1:
+            return {"kind": "empty", "position": (first + 0.5 * (r0 + r1)) * bw, "width": (r1 - r0) * bw,
+                    "score": 0.0}
+    best = None
+    for d in detect_dividers(h, params, start=first * bw, upper=up):
+        if abs(d.position - face) <= d.width / 2 + d.margin and (best is None or d.score > best.score):
+            best = d
+    if best is None:
+        return None
+    return {"kind": "peak-gap-peak", **best.to_json()}
+
+
+def _test(item: tuple[np.ndarray, np.ndarray, tuple[int, int], int, int], params: DividerParams
+          ) -> dict[str, Any] | None:
+    hist, upper, support, position, window = item
+    return face_divider(hist, support, position, window, params, upper)
+
+
+def test_edges(store, grid: Grid, floors: np.ndarray, cells: list[Box], edges: list[Edge], params: DividerParams,
+               window_m: float, band_z: np.ndarray, *, client=None) -> None:
+    """Fill ``edge.divider`` for every edge: one histogram pass over the tiles, one task per edge."""
+    if not edges:
+        return
+    window = params.bins(window_m)
+    index = BoxIndex.build(floors, np.array([c.row() for c in cells]))
+    tables = build_edge_tables(index, cells, edges, window)
+    tiles = [t.name for t in store.tiles]
+    parts = run_tasks(edge_histograms, tiles, client=client, label="merging: face histograms", keys=tiles,
+                      extra_args=(store, grid, index, tables, band_z))
+    hists = accumulate(parts, np.zeros(2 * len(edges), dtype=np.int64), np.full(2 * len(edges), 2 * window))
+    items = []
+    for k, e in enumerate(edges):
+        lo_a = cells[e.a].range(e.axis)[0]
+        hi_b = cells[e.b].range(e.axis)[1]
+        support = (max(0, lo_a - (e.position - window)), min(2 * window, hi_b - (e.position - window)))
+        items.append((hists[2 * k] + hists[2 * k + 1], hists[2 * k + 1], support, e.position, window))
+    results = run_tasks(_test, items, client=client, label="merging: face tests",
+                        keys=list(range(len(edges))), extra_args=(params,))
+    for e, r in zip(edges, results):
+        e.divider, e.tested = r, True
+
+
+@dataclass
+class MergeRules:
+    """When a group of cells is too weak to be a space (physical and scale-free limits)."""
+
+    min_space_area: float = 1.0  # m²
+    min_space_width: float = 0.5  # m
+    min_relative_density: float = 0.02  # of the median space's points per m²
+
+
+@dataclass
+class Components:
+    """Space label of each cell (-1: noise) and how it came about."""
+
+    labels: np.ndarray
+    absorbed: list[tuple[int, int]] = field(default_factory=list)  # (weak space, into space) by old labels
+    dropped: list[int] = field(default_factory=list)
+
+
+def merge(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRules | None = None) -> Components:
+    """Connected components of the edges without a divider, then absorption of weak groups."""
+    r = rules or MergeRules()
+    n = len(cells)
+    keep = [e for e in edges if e.divider is None]
+    rows = np.array([e.a for e in keep], dtype=np.int64)
+    cols = np.array([e.b for e in keep], dtype=np.int64)
+    graph = coo_array((np.ones(len(keep)), (rows, cols)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    parent = list(range(int(labels.max()) + 1 if n else 0))
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    area = np.array([(c.u1 - c.u0) * (c.v1 - c.v0) * bin_width ** 2 for c in cells])
+    count = np.array([c.count for c in cells], dtype=np.float64)
+    cu0, cu1 = np.array([c.u0 for c in cells], np.int64), np.array([c.u1 for c in cells], np.int64)
+    cv0, cv1 = np.array([c.v0 for c in cells], np.int64), np.array([c.v1 for c in cells], np.int64)
+    absorbed: list[tuple[int, int]] = []
+    dropped: list[int] = []
+    for _ in range(len(parent) + 1):
+        comp = np.array([find(int(x)) for x in labels], dtype=np.int64) if n else np.zeros(0, np.int64)
+        ids = np.unique(comp)
+        c_area = np.bincount(comp, weights=area, minlength=len(parent))
+        c_count = np.bincount(comp, weights=count, minlength=len(parent))
+        dens = np.where(c_area > 0, c_count / np.maximum(c_area, 1e-12), 0.0)
+        live = [int(k) for k in ids if k not in dropped]
+        med = float(np.median(dens[live])) if live else 0.0
+        big = np.iinfo(np.int64).max
+        lo_u = np.full(len(parent), big)
+        lo_v = np.full(len(parent), big)
+        hi_u = np.full(len(parent), -big)
+        hi_v = np.full(len(parent), -big)
+        np.minimum.at(lo_u, comp, cu0)
+        np.minimum.at(lo_v, comp, cv0)
+        np.maximum.at(hi_u, comp, cu1)
+        np.maximum.at(hi_v, comp, cv1)
+        weak = []
+        for k in live:
+            width = min(hi_u[k] - lo_u[k], hi_v[k] - lo_v[k]) * bin_width
+            if (c_area[k] < r.min_space_area or width < r.min_space_width or c_count[k] == 0
+                    or dens[k] < r.min_relative_density * med):
+                weak.append((c_area[k], k))
+        if not weak:
+            break
+        weak.sort()
+        _, k = weak[0]
+        faces: dict[int, list[float]] = defaultdict(lambda: [0.0, 0.0])  # other -> [free length, divided length]
+        for e in edges:
+            ca, cb = comp[e.a], comp[e.b]
+            if (ca == k) == (cb == k):
+                continue
+            other = int(cb if ca == k else ca)
+            if other in dropped:
+                continue
+            faces[other][0 if e.divider is None else 1] += e.length_bins
+        if faces:
+            into = max(faces, key=lambda o: (faces[o][0], faces[o][1], -o))
+            parent[k] = into
+            absorbed.append((int(k), int(into)))
+        else:
+            dropped.append(int(k))
+    comp = np.array([find(int(x)) for x in labels], dtype=np.int64) if n else np.zeros(0, np.int64)
+    out = np.full(n, -1, dtype=np.int64)
+    live = [k for k in np.unique(comp) if k not in dropped]
+    for new, k in enumerate(sorted(live, key=lambda k: int(np.flatnonzero(comp == k)[0]))):
+        out[comp == k] = new
+    return Components(out, absorbed, dropped)

@@ -1,0 +1,220 @@
+"""Slicing the building into an over-segmented set of cells with peak-gap-peak dividers (paper 3.1.1).
+
+Order of the axes (the paper leaves it open):
+
+1. **z first, over the whole building**: storeys are separated by the void
+   between a ceiling and the next floor (a slab is a divider).  One histogram.
+2. **Then alternately along the first and the second horizontal axis, per
+   storey, recursively**: dividers along ``u`` cut each storey into slices,
+   each slice is cut along ``v`` (the paper's two steps), and every resulting
+   box is searched again along ``u``, then ``v``... until a box has been
+   searched along both axes without a new divider (or ``max_levels``).  The
+   recursion finds walls that span only part of the building, whose void is
+   filled in a whole-storey histogram by the rooms beside them; the paper
+   only goes one level deep.
+
+The upper band of a storey (points more than ``upper_band`` metres above its
+floor, i.e. above the doors) gets its own histogram in the same bincount: the
+void test is made there, where a wall is solid and a room's ceiling continuous
+(see :func:`engine.dividers.detect_dividers`).
+
+Every divider is elongated across the box it was found in, so the boxes
+over-segment the spaces; :mod:`engine.merging` merges them back.
+
+Each level is ONE pass over the tiles (:func:`engine.histograms.segment_histograms`:
+all active boxes' histograms from one bincount per tile, summed) and one task
+per box for its divider search.  Besides peak-gap-peak dividers, runs of at
+least ``empty_run`` metres without any point cut a box too (nothing was
+scanned there: whatever lies on the two sides is not connected) and are left
+out of every box; that also trims the empty ends of a box.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from engine.dividers import DividerParams, detect_dividers, empty_runs
+from engine.histograms import BoxIndex, Grid, accumulate, segment_histograms
+from tiles.tasks import run_tasks
+
+AXES = ("u", "v", "z")
+
+
+@dataclass
+class Box:
+    """A box of one storey in aligned bins: ``u`` in ``[u0, u1)``, ``v`` in ``[v0, v1)``."""
+
+    floor: int
+    u0: int
+    u1: int
+    v0: int
+    v1: int
+    quiet: int = 0  # consecutive axes searched without a new divider
+    final: bool = False
+    count: int = 0
+    level: int = 0
+
+    def range(self, axis: int) -> tuple[int, int]:
+        return (self.u0, self.u1) if axis == 0 else (self.v0, self.v1)
+
+    def with_range(self, axis: int, a: int, b: int, **kw: Any) -> "Box":
+        r = dict(u0=a, u1=b) if axis == 0 else dict(v0=a, v1=b)
+        return dataclasses.replace(self, **r, **kw)
+
+    def row(self) -> list[int]:
+        return [self.floor, self.u0, self.u1, self.v0, self.v1]
+
+
+@dataclass
+class FoundDivider:
+    """A divider as recorded in ``meta/spaces``: positions in aligned metres."""
+
+    axis: str  # "u", "v" (walls) or "z" (storey slabs)
+    floor: int  # storey it was found in (-1 for slabs)
+    position: float  # centre of the void along the axis
+    width: float
+    score: float
+    extent: list[float]  # along the other horizontal axis (walls) or [] (slabs)
+    kind: str = "peak-gap-peak"  # or "empty": a run without points
+    level: int = 0
+    contrast: float = 1.0
+    void_ratio: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        return {"axis": self.axis, "floor": self.floor, "position": round(self.position, 4),
+                "width": round(self.width, 4), "score": round(float(self.score), 4),
+                "extent": [round(v, 4) for v in self.extent], "kind": self.kind, "level": self.level,
+                "contrast": round(float(self.contrast), 4), "void_ratio": round(float(self.void_ratio), 4)}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "FoundDivider":
+        return cls(**{f.name: d[f.name] for f in dataclasses.fields(cls) if f.name in d})
+
+
+@dataclass
+class Split:
+    """The result of one box's divider search along one axis (bins are global)."""
+
+    pieces: list[tuple[int, int, int]]  # (start, stop, points)
+    dividers: list[dict[str, Any]] = field(default_factory=list)  # Divider.to_json + "cut"
+    empties: list[tuple[int, int]] = field(default_factory=list)
+
+
+def split_histogram(hist: np.ndarray, lo: int, params: DividerParams, upper: np.ndarray | None = None) -> Split:
+    """Cut a histogram (first bin ``lo``) at its dividers and empty runs into occupied pieces.
+
+    ``upper`` is the histogram of the upper band (see :func:`engine.dividers.detect_dividers`).
+    """
+    h = np.asarray(hist)
+    n = len(h)
+    runs = empty_runs(h, params.bins(params.empty_run))
+    divs = detect_dividers(h, params, start=lo * params.bin_width, upper=upper)
+    cs = np.concatenate(([0], np.cumsum(h)))
+    # occupied intervals between the long empty runs
+    spans, a = [], 0
+    for r0, r1 in runs:
+        if r0 > a:
+            spans.append((a, r0))
+        a = r1
+    if a < n:
+        spans.append((a, n))
+    pieces = []
+    kept = []
+    for s0, s1 in spans:
+        cuts = sorted(d.cut for d in divs if s0 < d.cut < s1)
+        kept += [d for d in divs if s0 < d.cut < s1]
+        edges = [s0, *cuts, s1]
+        for p0, p1 in zip(edges[:-1], edges[1:]):
+            c = int(cs[p1] - cs[p0])
+            if c > 0:
+                pieces.append((lo + p0, lo + p1, c))
+    inner = [(lo + r0, lo + r1) for r0, r1 in runs if r0 > 0 and r1 < n]
+    return Split(pieces, [{**d.to_json(), "cut": lo + d.cut} for d in kept], inner)
+
+
+def _search(item: tuple[np.ndarray, np.ndarray, int], params: DividerParams) -> Split:
+    hist, upper, lo = item
+    return split_histogram(hist, lo, params, upper)
+
+
+def floor_levels(z_hist: np.ndarray, z_lo: int, floors: list[tuple[int, int]], z_bin: float,
+                 search: float = 1.0) -> list[int]:
+    """z bin of each storey's floor: the densest bin in the lowest ``search`` metres of the storey."""
+    out = []
+    for a, b in floors:
+        top = min(b, a + max(1, int(round(search / z_bin))))
+        out.append(a + int(np.argmax(z_hist[a - z_lo:top - z_lo])))
+    return out
+
+
+def find_storeys(z_hist: np.ndarray, z_lo: int, params: DividerParams) -> tuple[list[tuple[int, int]], list[FoundDivider]]:
+    """Storeys as z-bin ranges from the building's z histogram, and the slab dividers between them."""
+    split = split_histogram(z_hist, z_lo, params)
+    floors = [(a, b) for a, b, _ in split.pieces]
+    divs = [FoundDivider("z", -1, d["position"], d["width"], d["score"], [], level=0,
+                         contrast=d["contrast"], void_ratio=d["void_ratio"]) for d in split.dividers]
+    divs += [FoundDivider("z", -1, 0.5 * (a + b) * params.bin_width, (b - a) * params.bin_width, 0.0, [],
+                          kind="empty") for a, b in split.empties]
+    return floors, divs
+
+
+def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[Box], params: DividerParams,
+                  band_z: np.ndarray, *, client=None, max_levels: int = 8) -> tuple[list[Box], list[FoundDivider], list[dict[str, Any]]]:
+    """Recursive slicing of the storeys' boxes; returns the final cells, the dividers and per-level stats.
+
+    ``band_z`` is the first z bin of each storey's upper band (points above door height).
+    """
+    boxes = list(start)
+    dividers: list[FoundDivider] = []
+    stats: list[dict[str, Any]] = []
+    tiles = [t.name for t in store.tiles]
+    bw = grid.bin_width
+    for level in range(1, max_levels + 1):
+        axis = (level - 1) % 2
+        active_ids = [i for i, b in enumerate(boxes) if not b.final]
+        if not active_ids:
+            break
+        index = BoxIndex.build(np.array(floors), np.array([b.row() for b in boxes]))
+        active = np.array([not b.final for b in boxes], dtype=bool)
+        parts = run_tasks(segment_histograms, tiles, client=client, label=f"slicing level {level} ({AXES[axis]})",
+                          keys=tiles, extra_args=(store, grid, index, active, axis, band_z))
+        lo = np.array([b.range(axis)[0] for b in boxes])
+        length = np.array([b.range(axis)[1] - b.range(axis)[0] for b in boxes])
+        length[~active] = 0
+        hists = accumulate(parts, np.repeat(lo, 2), np.repeat(length, 2))  # key 2 * box + band
+        items = [(hists[2 * i] + hists[2 * i + 1], hists[2 * i + 1], int(lo[i])) for i in active_ids]
+        splits = run_tasks(_search, items, client=client, label=f"dividers level {level} ({AXES[axis]})",
+                           keys=active_ids, extra_args=(params,))
+        new: list[Box] = []
+        n_div = 0
+        for i, b in enumerate(boxes):
+            if b.final:
+                new.append(b)
+        for i, sp in zip(active_ids, splits):
+            b = boxes[i]
+            other = (b.v0, b.v1) if axis == 0 else (b.u0, b.u1)
+            extent = [other[0] * bw, other[1] * bw]
+            for d in sp.dividers:
+                dividers.append(FoundDivider(AXES[axis], b.floor, d["position"], d["width"], d["score"], extent,
+                                             level=level, contrast=d["contrast"], void_ratio=d["void_ratio"]))
+            for a0, a1 in sp.empties:
+                dividers.append(FoundDivider(AXES[axis], b.floor, 0.5 * (a0 + a1) * bw, (a1 - a0) * bw, 0.0, extent,
+                                             kind="empty", level=level))
+            n_div += len(sp.dividers)
+            if len(sp.pieces) == 1 and not sp.dividers:
+                p0, p1, c = sp.pieces[0]
+                quiet = b.quiet + 1
+                new.append(b.with_range(axis, p0, p1, quiet=quiet, final=quiet >= 2, count=c, level=level))
+            else:
+                for p0, p1, c in sp.pieces:
+                    new.append(b.with_range(axis, p0, p1, quiet=1, final=False, count=c, level=level))
+        stats.append({"level": level, "axis": AXES[axis], "searched": len(active_ids), "dividers": n_div,
+                      "boxes": len(new)})
+        boxes = new
+    for b in boxes:
+        b.final = True
+    boxes.sort(key=lambda b: (b.floor, b.u0, b.v0))
+    return boxes, dividers, stats

@@ -1,0 +1,438 @@
+"""Space parsing of a whole building (paper section 3): the stage that turns a tile store into spaces.
+
+Steps, each a batch of dask tasks over the tiles (nothing loads the building
+into one process):
+
+1. one pass: per-tile orientation evidence (:mod:`engine.alignment`) and the z histogram;
+2. one pass: refinement of the yaw -> the aligned frame;
+3. storeys from the z histogram (:func:`engine.slicing.find_storeys`);
+4. recursive slicing along u, v, u, ... (:mod:`engine.slicing`), one pass per level;
+5. merging (:mod:`engine.merging`): one pass for all shared faces, one task per face;
+6. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile and
+   collecting per-space counts, z ranges and tiles.
+
+The document ``meta/spaces`` (:meth:`SpaceParse.to_doc`), which later stages
+rely on::
+
+    {"version": 1,
+     "frame": {"yaw", "yaw_deg", "origin": [x, y, z]},
+         # aligned = R(-yaw) (world - origin): u = c*dx + s*dy, v = -s*dx + c*dy, z' = z - origin_z
+         # world:   x = origin_x + c*u - s*v, y = origin_y + s*u + c*v  (c, s = cos, sin of yaw)
+     "grid": {"bin_width", "z_bin"},          # bins of the aligned frame (metres)
+     "floors": [{"id", "z_range": [z0, z1] (world), "point_count"}],
+     "cells": [{"id", "floor", "box": [u0, v0, u1, v1] (aligned metres), "point_count", "space"}],
+     "dividers": [{"axis": "u"|"v"|"z", "floor" (-1 for slabs), "position" (aligned metres along axis;
+                   for "z" world z), "width", "extent": [a, b] (along the other horizontal axis),
+                   "score", "kind": "peak-gap-peak"|"empty", "level", "contrast", "void_ratio"}],
+     "spaces": [{"id", "floor", "cells": [ids], "footprint": GeoJSON Polygon/MultiPolygon (world x, y),
+                 "area_m2", "z_range": [z0, z1] (world), "point_count", "tiles": [names],
+                 "neighbours": [{"space", "faces": [{"axis", "position", "extent": [a, b], "z_range",
+                                 "segment": [[x0, y0], [x1, y1]] (world), "divider": bool,
+                                 "divider_kind", "score"}]}]}],
+     "unassigned_points", "point_count",
+     "stats": {"levels": [...], "cells", "edges", "edges_divided", "seconds": {...}},
+     "params": {...}}
+
+A face is a piece of a shared face between two cells of the two spaces, along
+``axis`` (the face is normal to it) at ``position``; ``extent`` runs along the
+other horizontal axis; contiguous pieces with the same divider status are
+joined.  These are the *connection areas* of paper section 4.2: the space
+update removes a neighbour edge only where a detected wall lies in one, and
+doors are sought in the faces without divider.  The per-tile orientation
+evidence is in ``meta/alignment`` (see :class:`engine.alignment.Alignment`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from typing import Any
+
+import dask.config
+import numpy as np
+
+from engine import config  # noqa: F401  (registers the defaults)
+from engine.alignment import (AlignmentParams, Frame, estimate_alignment, orientation_histogram)
+from engine.dividers import DividerParams
+from engine.histograms import BoxIndex, Grid, z_histogram
+from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
+from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
+from tiles.schema import Dimension
+from tiles.tasks import run_tasks
+
+DOC = "spaces"
+VERSION = 1
+
+
+# -- parameters -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SpaceParams:
+    """All parameters of space parsing, physical (metres) or scale-free; see ``engine/spaces.yaml``."""
+
+    bin_width: float = 0.02
+    z_bin: float = 0.02
+    walls: DividerParams = field(default_factory=DividerParams)
+    slabs: DividerParams = field(default_factory=lambda: DividerParams(
+        stop_min=0.10, stop_max=2.0, stop_steps=14, min_spacing=1.5, empty_run=2.5, max_void_ratio_full=0.35))
+    alignment: AlignmentParams = field(default_factory=AlignmentParams)
+    yaw: float | None = None  # degrees; None: estimate
+    max_levels: int = 8
+    upper_band: float = 2.2  # m above a storey's floor: doors end below, walls are solid above
+    merge_window: float = 2.0
+    min_face: float = 0.3
+    min_space_area: float = 1.0
+    min_space_width: float = 0.5
+    min_relative_density: float = 0.02
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "walls", dataclasses.replace(self.walls, bin_width=self.bin_width))
+        object.__setattr__(self, "slabs", dataclasses.replace(self.slabs, bin_width=self.z_bin))
+
+    @property
+    def rules(self) -> MergeRules:
+        return MergeRules(self.min_space_area, self.min_space_width, self.min_relative_density)
+
+    @classmethod
+    def from_config(cls, **overrides: Any) -> "SpaceParams":
+        """The parameters under ``buildingparser.spaces`` in dask.config, with overrides."""
+        c = dict(dask.config.get("buildingparser.spaces", {}) or {})
+        c = {k.replace("-", "_"): v for k, v in c.items()}
+        kw: dict[str, Any] = {}
+        for name in ("bin_width", "z_bin", "yaw", "max_levels", "upper_band", "merge_window", "min_face", "min_space_area",
+                     "min_space_width", "min_relative_density"):
+            if c.get(name) is not None:
+                kw[name] = c[name]
+        if c.get("walls"):
+            kw["walls"] = DividerParams.from_dict(c["walls"])
+        if c.get("slabs"):
+            kw["slabs"] = DividerParams.from_dict(c["slabs"])
+        if c.get("alignment"):
+            kw["alignment"] = AlignmentParams.from_dict(c["alignment"])
+        kw.update(overrides)
+        return cls(**kw)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["walls"], d["slabs"] = self.walls.to_dict(), self.slabs.to_dict()
+        d["alignment"] = self.alignment.to_dict()
+        return d
+
+
+# -- the document's mirror ---------------------------------------------------------------------------
+
+@dataclass
+class Floor:
+    id: int
+    z_range: list[float]
+    point_count: int = 0
+
+
+@dataclass
+class Cell:
+    id: int
+    floor: int
+    box: list[float]  # [u0, v0, u1, v1] aligned metres
+    point_count: int
+    space: int
+
+
+@dataclass
+class Face:
+    axis: str
+    position: float
+    extent: list[float]
+    z_range: list[float]
+    segment: list[list[float]]
+    divider: bool
+    divider_kind: str | None = None
+    score: float | None = None
+
+
+@dataclass
+class Neighbour:
+    space: int
+    faces: list[Face]
+
+    @property
+    def length(self) -> float:
+        return float(sum(f.extent[1] - f.extent[0] for f in self.faces))
+
+
+@dataclass
+class Space:
+    id: int
+    floor: int
+    cells: list[int]
+    footprint: dict[str, Any]
+    area_m2: float
+    z_range: list[float]
+    point_count: int
+    tiles: list[str]
+    neighbours: list[Neighbour]
+
+
+@dataclass
+class SpaceParse:
+    """The result of space parsing: the mirror of the ``meta/spaces`` document."""
+
+    frame: Frame
+    bin_width: float
+    z_bin: float
+    floors: list[Floor]
+    cells: list[Cell]
+    dividers: list[FoundDivider]
+    spaces: list[Space]
+    point_count: int = 0
+    unassigned_points: int = 0
+    stats: dict[str, Any] = field(default_factory=dict)
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def space(self, space_id: int) -> Space:
+        return next(s for s in self.spaces if s.id == space_id)
+
+    def to_doc(self) -> dict[str, Any]:
+        return _jsonable({
+            "version": VERSION, "frame": self.frame.to_json(),
+            "grid": {"bin_width": self.bin_width, "z_bin": self.z_bin},
+            "floors": [dataclasses.asdict(f) for f in self.floors],
+            "cells": [dataclasses.asdict(c) for c in self.cells],
+            "dividers": [d.to_json() for d in self.dividers],
+            "spaces": [dataclasses.asdict(s) for s in self.spaces],
+            "point_count": self.point_count, "unassigned_points": self.unassigned_points,
+            "stats": self.stats, "params": self.params})
+
+    @classmethod
+    def from_doc(cls, d: dict[str, Any]) -> "SpaceParse":
+        spaces = []
+        for s in d["spaces"]:
+            nbs = [Neighbour(n["space"], [Face(**f) for f in n["faces"]]) for n in s["neighbours"]]
+            spaces.append(Space(**{**s, "neighbours": nbs}))
+        return cls(frame=Frame.from_json(d["frame"]), bin_width=d["grid"]["bin_width"], z_bin=d["grid"]["z_bin"],
+                   floors=[Floor(**f) for f in d["floors"]], cells=[Cell(**c) for c in d["cells"]],
+                   dividers=[FoundDivider.from_json(x) for x in d["dividers"]], spaces=spaces,
+                   point_count=d.get("point_count", 0), unassigned_points=d.get("unassigned_points", 0),
+                   stats=d.get("stats", {}), params=d.get("params", {}))
+
+    @classmethod
+    def load(cls, store) -> "SpaceParse":
+        """The parse stored in a tile store's ``meta/spaces``."""
+        doc = store.doc(DOC)
+        if doc is None:
+            from tiles.errors import UserError
+
+            raise UserError(store.url, "no space parsing in this tile store: run 'buildingparser spaces' first")
+        return cls.from_doc(doc)
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    return x
+
+
+# -- tasks ---------------------------------------------------------------------------------------------
+
+def _first_pass(tile: str, store, params: AlignmentParams, z_lo: int, z_n: int, z_bin: float) -> dict[str, Any]:
+    """Orientation evidence and z histogram of one tile (one read of its coordinates)."""
+    xyz = store.xyz(tile)
+    bz = np.floor(xyz[:, 2] / z_bin).astype(np.int64)
+    return {"orientation": orientation_histogram(xyz[:, :2], params), "z": z_histogram(bz, z_lo, z_n)}
+
+
+def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.ndarray, n_cells: int,
+                n_spaces: int) -> dict[str, Any]:
+    """Write ``cell_id`` and ``space_id`` of one tile; per-space counts and z ranges."""
+    xyz = store.xyz(tile)
+    bu, bv, bz = grid.bins(xyz)
+    cell = index.locate(bu, bv, bz)
+    space = np.where(cell >= 0, cell_space[np.clip(cell, 0, None)], -1)
+    store.write_array(tile, "cell_id", cell.astype(np.int32))
+    store.write_array(tile, "space_id", space.astype(np.int32))
+    z = xyz[:, 2] + store.meta.origin[2]
+    zmin = np.full(n_spaces, np.inf)
+    zmax = np.full(n_spaces, -np.inf)
+    s = space >= 0
+    np.minimum.at(zmin, space[s], z[s])
+    np.maximum.at(zmax, space[s], z[s])
+    return {"space_counts": np.bincount(space[s], minlength=n_spaces),
+            "cell_counts": np.bincount(cell[cell >= 0], minlength=n_cells),
+            "zmin": zmin, "zmax": zmax, "unassigned": int((~s).sum())}
+
+
+# -- the stage ---------------------------------------------------------------------------------------------
+
+def _initial_boxes(store, grid: Grid, floors: list[tuple[int, int]]) -> list[Box]:
+    """One box per storey covering every tile's bounds (rotated corners), in bins."""
+    o = np.asarray(store.meta.origin)
+    corners = []
+    for t in store.tiles:
+        x0, y0, _, x1, y1, _ = t.bounds
+        corners += [[x0, y0, 0], [x0, y1, 0], [x1, y0, 0], [x1, y1, 0]]
+    a = grid.aligned(np.asarray(corners, dtype=np.float64) - o)
+    u0 = int(math.floor(a[:, 0].min() / grid.bin_width)) - 1
+    u1 = int(math.floor(a[:, 0].max() / grid.bin_width)) + 2
+    v0 = int(math.floor(a[:, 1].min() / grid.bin_width)) - 1
+    v1 = int(math.floor(a[:, 1].max() / grid.bin_width)) + 2
+    return [Box(f, u0, u1, v0, v1) for f in range(len(floors))]
+
+
+def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "SpaceParse":
+    """Parse a tile store into spaces; writes ``cell_id``/``space_id`` in every tile and ``meta/spaces``.
+
+    Parameters
+    ----------
+    store
+        A :class:`tiles.store.TileStore`.
+    client
+        A ``distributed.Client`` (None: tasks run here, one after another).
+    params
+        Parameters; default: :meth:`SpaceParams.from_config` (``buildingparser.spaces.*``).
+    """
+    p = params or SpaceParams.from_config()
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    tiles = [t.name for t in store.tiles]
+    meta = store.meta
+    origin = tuple(float(v) for v in meta.origin)
+    z_lo = int(math.floor((meta.bounds[2] - origin[2]) / p.z_bin)) - 1
+    z_n = int(math.floor((meta.bounds[5] - origin[2]) / p.z_bin)) + 2 - z_lo
+    first = run_tasks(_first_pass, tiles, client=client, label="spaces: evidence + z histogram", keys=tiles,
+                      extra_args=(store, p.alignment, z_lo, z_n, p.z_bin))
+    z_hist = np.sum([r["z"] for r in first], axis=0)
+    seconds["first_pass"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    if p.yaw is None:
+        alignment = estimate_alignment(store, client=client, params=p.alignment,
+                                       evidence=[r["orientation"] for r in first])
+        frame = alignment.frame
+        store.set_doc("alignment", _jsonable(alignment.to_doc()))
+    else:
+        frame = Frame(math.radians(float(p.yaw)), origin)
+    seconds["alignment"] = time.perf_counter() - t
+    grid = Grid.for_store(store, frame, p.bin_width, p.z_bin)
+
+    t = time.perf_counter()
+    floors, slabs = find_storeys(z_hist, z_lo, p.slabs)
+    for d in slabs:
+        d.position += frame.origin[2]
+    ground = floor_levels(z_hist, z_lo, floors, p.z_bin)
+    band_z = np.array([g + int(round(p.upper_band / p.z_bin)) for g in ground], dtype=np.int64)
+    start = _initial_boxes(store, grid, floors)
+    cells, walls, levels = slice_storeys(store, grid, floors, start, p.walls, band_z, client=client,
+                                         max_levels=p.max_levels)
+    seconds["slicing"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    edges = neighbour_edges(cells, p.walls.bins(p.min_face))
+    floors_arr = np.array(floors, dtype=np.int64).reshape(-1, 2)
+    test_edges(store, grid, floors_arr, cells, edges, p.walls, p.merge_window, band_z, client=client)
+    comps = merge(cells, edges, p.bin_width, p.rules)
+    seconds["merging"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    n_spaces = int(comps.labels.max()) + 1 if len(cells) and comps.labels.max() >= 0 else 0
+    index = BoxIndex.build(floors_arr, np.array([c.row() for c in cells]).reshape(-1, 5))
+    store.add_dimensions([
+        Dimension("cell_id", "int32", "result", "over-segmented cell of space parsing (-1: none)",
+                  {"name": "cell_id", "type": "int32", "description": "space parsing cell"}),
+        Dimension("space_id", "int32", "result", "space (room, hallway) of the point (-1: none)",
+                  {"name": "space_id", "type": "int32", "description": "space id"}),
+    ])
+    labelled = run_tasks(_label_tile, tiles, client=client, label="spaces: writing labels", keys=tiles,
+                         extra_args=(store, grid, index, comps.labels.astype(np.int64), len(cells), n_spaces))
+    seconds["labelling"] = time.perf_counter() - t
+
+    parse = _assemble(store, p, frame, floors, slabs + walls, cells, edges, comps.labels, labelled, tiles,
+                      n_spaces)
+    parse.stats = {"levels": levels, "cells": len(cells), "edges": len(edges),
+                   "edges_divided": int(sum(e.divider is not None for e in edges)),
+                   "absorbed": len(comps.absorbed), "dropped": len(comps.dropped),
+                   "seconds": {k: round(v, 3) for k, v in seconds.items()}}
+    parse.stats["seconds"]["total"] = round(time.perf_counter() - t0, 3)
+    store.set_doc(DOC, parse.to_doc())
+    return parse
+
+
+def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]], dividers: list[FoundDivider],
+              boxes: list[Box], edges: list[Edge], labels: np.ndarray, labelled: list[dict[str, Any]],
+              tiles: list[str], n_spaces: int) -> SpaceParse:
+    from engine.footprints import union_footprint
+
+    bw, zb = p.bin_width, p.z_bin
+    oz = frame.origin[2]
+    space_counts = np.sum([r["space_counts"] for r in labelled], axis=0) if labelled else np.zeros(n_spaces)
+    cell_counts = np.sum([r["cell_counts"] for r in labelled], axis=0) if labelled else np.zeros(len(boxes))
+    zmin = np.min([r["zmin"] for r in labelled], axis=0) if labelled else np.zeros(n_spaces)
+    zmax = np.max([r["zmax"] for r in labelled], axis=0) if labelled else np.zeros(n_spaces)
+    touched: dict[int, list[str]] = defaultdict(list)
+    for name, r in zip(tiles, labelled):
+        for s in np.flatnonzero(r["space_counts"]):
+            touched[int(s)].append(name)
+    floor_list = [Floor(i, [oz + a * zb, oz + b * zb], 0) for i, (a, b) in enumerate(floors)]
+    cells = []
+    for i, b in enumerate(boxes):
+        cells.append(Cell(i, b.floor, [b.u0 * bw, b.v0 * bw, b.u1 * bw, b.v1 * bw], int(cell_counts[i]),
+                          int(labels[i])))
+        floor_list[b.floor].point_count += int(cell_counts[i])
+    faces = _faces(frame, boxes, edges, labels, floor_list, bw)
+    spaces = []
+    for s in range(n_spaces):
+        members = [i for i in range(len(boxes)) if labels[i] == s]
+        rects = [cells[i].box for i in members]
+        fp, area = union_footprint(rects, frame)
+        nbs = [Neighbour(o, faces[(s, o)]) for o in sorted({o for (a, o) in faces if a == s})]
+        zr = [float(zmin[s]), float(zmax[s])] if np.isfinite(zmin[s]) else list(floor_list[boxes[members[0]].floor].z_range)
+        spaces.append(Space(s, boxes[members[0]].floor, members, fp, area, zr, int(space_counts[s]),
+                            touched.get(s, []), nbs))
+    return SpaceParse(frame, bw, zb, floor_list, cells, dividers, spaces, point_count=int(store.meta.point_count),
+                      unassigned_points=int(sum(r["unassigned"] for r in labelled)), params=p.to_dict())
+
+
+def _faces(frame: Frame, boxes: list[Box], edges: list[Edge], labels: np.ndarray, floors: list[Floor],
+           bw: float) -> dict[tuple[int, int], list[Face]]:
+    """Shared faces between different spaces (both directions), contiguous pieces joined."""
+    pieces: dict[tuple[int, int], list[tuple]] = defaultdict(list)
+    for e in edges:
+        sa, sb = int(labels[e.a]), int(labels[e.b])
+        if sa < 0 or sb < 0 or sa == sb:
+            continue
+        kind = e.divider.get("kind") if e.divider else None
+        score = float(e.divider.get("score", 0.0)) if e.divider else None
+        key = (min(sa, sb), max(sa, sb))
+        pieces[key].append((e.axis, e.position, e.overlap[0], e.overlap[1], e.divider is not None, kind, score,
+                            e.floor))
+    out: dict[tuple[int, int], list[Face]] = defaultdict(list)
+    for key, items in pieces.items():
+        items.sort(key=lambda x: (x[0], x[1], x[4], x[2]))
+        joined: list[list] = []
+        for it in items:
+            if joined and joined[-1][0] == it[0] and joined[-1][1] == it[1] and joined[-1][4] == it[4] \
+                    and joined[-1][3] == it[2]:
+                joined[-1][3] = it[3]
+                if it[6] is not None:
+                    joined[-1][6] = max(joined[-1][6] or 0.0, it[6])
+            else:
+                joined.append(list(it))
+        faces = []
+        for axis, pos, o0, o1, div, kind, score, floor in joined:
+            a = pos * bw
+            ends = [[a, o0 * bw], [a, o1 * bw]] if axis == 0 else [[o0 * bw, a], [o1 * bw, a]]
+            seg = frame.to_world(np.array(ends))
+            faces.append(Face("u" if axis == 0 else "v", a, [o0 * bw, o1 * bw], list(floors[floor].z_range),
+                              [[float(v) for v in seg[0]], [float(v) for v in seg[1]]], bool(div), kind, score))
+        out[key] = faces
+        out[(key[1], key[0])] = faces
+    return out
