@@ -1,0 +1,458 @@
+"""The plan of a whole building: floors of spaces, walls with doors and windows, and every element.
+
+:func:`plan_building` is deterministic for a seed: each floor's layout, each
+space's furniture and each part's scan draw from their own random stream
+(``numpy.random.SeedSequence(seed, spawn_key=(stage, id...))``), so nothing
+depends on the order in which dask runs the tasks.
+
+Steps per floor: a layout of centre-line cells (:mod:`engine.synth.layout`);
+walls where cells of different spaces (or the outside) meet, one thickness per
+wall line; clear footprints (cells minus wall bodies); doors chosen so that
+every space of the floor is reachable from its hallways; windows on exterior
+walls; then per space the structural elements (:mod:`engine.synth.structure`),
+the furniture (:mod:`engine.synth.furniture`) and the scan positions.
+"""
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+import dask
+import numpy as np
+import shapely
+from shapely.geometry import Polygon, box
+from shapely.geometry.polygon import orient
+
+from engine.synth import colours, furniture, structure
+from engine.synth.building import Building, FloorInfo, Frame, Opening, PartSpec, Space, Wall
+from engine.synth.layout import CIRCULATION, Draft, floor_layout
+from tiles.errors import UserError
+
+#: Random-stream keys (first element of every spawn_key).
+S_BUILDING, S_FLOOR, S_SPACE, S_SCAN = 0, 1, 2, 3
+
+#: Average floor area per space, used to turn ``rooms`` into an area.
+AREA_PER_SPACE = 31.0
+MIN_AREA_PER_FLOOR = 40.0
+
+
+def rng_for(seed: int, *key: int) -> np.random.Generator:
+    """The random stream of one stage of one object, independent of every other."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=tuple(int(k) for k in key)))
+
+
+def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
+                  density: float | None = None, yaw: float = 0.0,
+                  offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                  part_points: int | None = None) -> Building:
+    """Plan a building: spaces with footprints, walls with openings, elements with boxes.
+
+    Parameters
+    ----------
+    seed
+        Everything follows from it.
+    area_m2
+        Gross floor area of the whole building (all floors, wall centre lines).
+    rooms
+        Number of spaces of the whole building (hallways and lobby included);
+        met exactly when room sizes allow.  With ``area_m2`` too, the area sets
+        the footprint and ``rooms`` the count.  Neither: ``buildingparser.synth.area-m2``.
+    floors
+        Storeys, stacked with a slab and a ceiling void between them.
+    density
+        Points per m^2 of scanned surface before the per-space factor (x0.5-x2);
+        default ``buildingparser.synth.density``.
+    yaw
+        Rotation of the building about the vertical (degrees).
+    offset
+        World position of the local origin (e.g. UTM ``500000 4100000 30``).
+    part_points
+        Largest estimated point count of one scan task; a bigger space is cut into pieces.
+    """
+    floors = int(floors)
+    if floors < 1:
+        raise UserError(None, f"floors must be at least 1, not {floors}")
+    if rooms is not None and int(rooms) < floors:
+        raise UserError(None, f"rooms must be at least one per floor ({floors}), not {rooms}")
+    density = float(dask.config.get("buildingparser.synth.density")) if density is None else float(density)
+    if not (density > 0 and math.isfinite(density)):
+        raise UserError(None, f"density must be a positive number of points per m^2, not {density}")
+    if area_m2 is None:
+        area_m2 = (float(rooms) * AREA_PER_SPACE if rooms is not None
+                   else float(dask.config.get("buildingparser.synth.area-m2")))
+    area_m2 = float(area_m2)
+    if not (math.isfinite(area_m2) and area_m2 >= MIN_AREA_PER_FLOOR * floors):
+        raise UserError(None, f"area must be at least {MIN_AREA_PER_FLOOR:g} m^2 per floor, not {area_m2:g} m^2 "
+                              f"for {floors} floor(s)")
+    if len(offset) != 3 or not all(math.isfinite(float(v)) for v in offset):
+        raise UserError(None, f"offset must be three finite numbers, not {offset}")
+    part_points = int(part_points or dask.config.get("buildingparser.synth.part-points"))
+    frame = Frame(math.radians(float(yaw)), tuple(float(v) for v in offset))
+
+    brng = rng_for(seed, S_BUILDING)
+    style = colours.building_style(brng)
+    ext_t = round(brng.uniform(0.25, 0.35), 3)
+    per_floor = [rooms // floors + (1 if f < rooms % floors else 0) for f in range(floors)] if rooms else None
+    layout_seed = rng_for(seed, S_FLOOR, 0)
+    footprint_layout = floor_layout(layout_seed, area_m2 / floors,
+                                    target=per_floor[0] if per_floor else None, lobby=True)
+    length, depth = footprint_layout.length, footprint_layout.depth
+
+    spaces: list[Space] = []
+    walls: list[Wall] = []
+    openings: list[Opening] = []
+    floor_infos: list[FloorInfo] = []
+    counters: dict[str, int] = defaultdict(int)
+    z = 0.0
+    for f in range(floors):
+        frng = rng_for(seed, S_FLOOR, f, 1)
+        if f == 0:
+            lay = footprint_layout
+        else:  # same outline, its own rooms
+            lay = floor_layout(rng_for(seed, S_FLOOR, f), length * depth,
+                               target=per_floor[f] if per_floor else None, lobby=False)
+            lay = _fit_outline(lay, length, depth)
+        base_h = round(frng.uniform(2.7, 3.3), 3)
+        first = len(spaces)
+        for d in lay.drafts:
+            spaces.append(_new_space(d, len(spaces), f, z, base_h, frng, counters))
+        drafts = {first + i: d for i, d in enumerate(lay.drafts)}
+        floor_walls = _walls(drafts, f, z, spaces, frng, ext_t, len(walls), length, depth)
+        walls.extend(floor_walls)
+        _footprints(drafts, floor_walls, spaces)
+        _doors(frng, floor_walls, spaces, openings, drafts, exterior_door=(f == 0))
+        _windows(frng, floor_walls, spaces, openings, style)
+        ceiling_max = max(spaces[i].z1 for i in drafts) - z
+        plenum = frng.uniform(0.1, 0.6)
+        slab = frng.uniform(0.2, 0.4)
+        top = f == floors - 1
+        floor_infos.append(FloorInfo(f, z, z + ceiling_max,
+                                     (z + ceiling_max + plenum, z + ceiling_max + plenum + slab) if not top else
+                                     (z + ceiling_max + plenum, z + ceiling_max + plenum)))
+        z = round(z + ceiling_max + plenum + slab, 3)
+
+    for w in walls:
+        for o in w.openings:
+            for s in (w.left, w.right):
+                if s >= 0:
+                    (spaces[s].doors if o.kind == "door" else spaces[s].windows).append(o.id)
+        for s in {w.left, w.right} - {-1}:
+            spaces[s].walls.append(w.id)
+    for s in spaces:
+        s.doors, s.windows = sorted(set(s.doors)), sorted(set(s.windows))
+    # elements, per space from its own random stream
+    for s in spaces:
+        srng = rng_for(seed, S_SPACE, s.id)
+        colours.space_colours(srng, s, style)
+        structure.add_structure(srng, s, walls, openings, style)
+        furniture.furnish(srng, s, walls, openings, style)
+        structure.place_scanners(srng, s)
+    next_id = 0
+    for s in spaces:
+        for e in s.elements:
+            e.id = next_id
+            next_id += 1
+            e.fit_box(s.noise_bound + 1e-3)
+        for e in s.elements:
+            if e.cls == "door":
+                openings[e.info["opening"]].elements.append(e.id)
+            elif e.cls == "window":
+                openings[e.info["opening"]].elements.append(e.id)
+    params = {"seed": int(seed), "area_m2": area_m2, "rooms": rooms, "floors": floors, "density": density,
+              "part_points": part_points, "generator": "engine.synth"}
+    b = Building(int(seed), frame, density, spaces, walls, openings, floor_infos, params=params)
+    b.parts = plan_parts(b, part_points)
+    return b
+
+
+def _fit_outline(lay, length: float, depth: float):
+    """Stretch an upper floor's layout onto the ground floor's outline (same building)."""
+    sx, sy = length / lay.length, depth / lay.depth
+    for d in lay.drafts:
+        d.cells = [(round(a * sx, 3), round(b * sy, 3), round(c * sx, 3), round(e * sy, 3)) for a, b, c, e in d.cells]
+        d.partials = [((round(p[0] * sx, 3), round(p[1] * sy, 3)), (round(q[0] * sx, 3), round(q[1] * sy, 3)))
+                      for p, q in d.partials]
+    lay.length, lay.depth = length, depth
+    return lay
+
+
+TYPE_NAMES = {"office": "office", "conferenceRoom": "conferenceRoom", "hallway": "hallway", "lobby": "lobby",
+              "storage": "storage", "WC": "WC", "openspace": "openspace"}
+
+
+def _room_type(rng: np.random.Generator, d: Draft) -> str:
+    if d.type in ("hallway", "lobby", "openspace"):
+        return d.type
+    area, width = d.area, d.width
+    if d.type == "room_small":
+        return str(rng.choice(["storage", "WC", "office"], p=[0.4, 0.3, 0.3]))
+    if d.type == "room_l":
+        return "conferenceRoom" if rng.random() < 0.3 else "office"
+    if area < 11 or width < 2.9:
+        return str(rng.choice(["storage", "WC", "office"], p=[0.4, 0.3, 0.3]))
+    if area > 28 and rng.random() < 0.4:
+        return "conferenceRoom"
+    r = rng.random()
+    return "storage" if r < 0.06 else "WC" if r < 0.12 else "office"
+
+
+def _new_space(d: Draft, sid: int, floor: int, z: float, base_h: float, rng: np.random.Generator,
+               counters: dict[str, int]) -> Space:
+    t = _room_type(rng, d)
+    counters[t] += 1
+    h = base_h
+    if t == "hallway":
+        h = max(2.6, base_h - rng.uniform(0.0, 0.3))
+    elif t == "lobby":
+        h = min(4.0, base_h + rng.uniform(0.3, 0.9))
+    elif t in ("conferenceRoom", "openspace"):
+        h = min(4.0, base_h + rng.uniform(0.0, 0.5))
+    elif rng.random() < 0.2:
+        h = base_h - rng.uniform(0.0, 0.1)
+    return Space(sid, f"{t}_{counters[t]}", t, floor, list(d.cells), z0=z, z1=round(z + h, 3))
+
+
+# -- walls ---------------------------------------------------------------------------------
+def _walls(drafts: dict[int, Draft], floor: int, z: float, spaces: list[Space], rng: np.random.Generator,
+           ext_t: float, first_id: int, length: float, depth: float) -> list[Wall]:
+    """Walls where cells of different spaces meet (or a cell meets the outside), plus partial walls."""
+    cells = [(c, sid) for sid, d in drafts.items() for c in d.cells]
+    lines: dict[tuple[int, float], dict[str, list]] = defaultdict(lambda: {"lo": [], "hi": []})
+    for (x0, y0, x1, y1), sid in cells:
+        # horizontal lines (axis 1 = constant y): the cell is above its bottom line, below its top line
+        lines[(1, round(y0, 6))]["hi"].append((x0, x1, sid))
+        lines[(1, round(y1, 6))]["lo"].append((x0, x1, sid))
+        lines[(0, round(x0, 6))]["hi"].append((y0, y1, sid))
+        lines[(0, round(x1, 6))]["lo"].append((y0, y1, sid))
+    thickness: dict[tuple[int, float], float] = {}
+    raw: list[tuple[tuple[float, float], tuple[float, float], int, int, float, str]] = []
+    for key in sorted(lines):
+        axis, c = key
+        lo, hi = lines[key]["lo"], lines[key]["hi"]
+        breaks = sorted({v for a, b, _ in lo + hi for v in (a, b)})
+        segs: list[list] = []
+        for a, b in zip(breaks[:-1], breaks[1:]):
+            m = (a + b) / 2
+            below = next((s for p, q, s in lo if p < m < q), -1)
+            above = next((s for p, q, s in hi if p < m < q), -1)
+            if below == above:
+                continue
+            if segs and segs[-1][1] == a and segs[-1][2:] == [below, above]:
+                segs[-1][1] = b
+            else:
+                segs.append([a, b, below, above])
+        for a, b, below, above in segs:
+            exterior = below == -1 or above == -1
+            if exterior:
+                t = ext_t
+            else:
+                if key not in thickness:
+                    thickness[key] = round(float(rng.uniform(0.1, 0.22)), 3)
+                t = thickness[key]
+            if axis == 1:  # along +x: left (+y) is above
+                raw.append(((a, c), (b, c), above, below, t, "exterior" if exterior else "interior"))
+            else:  # along +y: left (-x) is the cell whose right side is on the line
+                raw.append(((c, a), (c, b), below, above, t, "exterior" if exterior else "interior"))
+    for sid, d in drafts.items():
+        for p, q in d.partials:
+            raw.append((p, q, sid, sid, round(float(rng.uniform(0.1, 0.15)), 3), "partial"))
+    walls = []
+    for k, (p0, p1, left, right, t, kind) in enumerate(raw):
+        zs = [spaces[s].z1 for s in (left, right) if s >= 0]
+        walls.append(Wall(first_id + k, floor, (float(p0[0]), float(p0[1])), (float(p1[0]), float(p1[1])),
+                          float(t), z, max(zs), left, right, kind))
+    _joint_reach(walls)
+    return walls
+
+
+def _joint_reach(walls: list[Wall]) -> None:
+    """How far each wall body reaches past its ends: half the thickness of the walls it meets there."""
+    for w in walls:
+        for end in (0, 1):
+            p = np.asarray(w.p0 if end == 0 else w.p1)
+            reach = 0.0
+            for o in walls:
+                if o is w or abs(float(np.dot(o.direction, w.direction))) > 1e-9:
+                    continue
+                # does o's centre line pass through p?
+                rel = p - np.asarray(o.p0)
+                along = float(np.dot(rel, o.direction))
+                off = float(np.dot(rel, o.normal))
+                if abs(off) < 1e-6 and -1e-6 <= along <= o.length + 1e-6:
+                    reach = max(reach, o.thickness / 2)
+            if w.kind == "partial" and reach == 0.0:
+                continue
+            if end == 0:
+                w.ext0 = reach
+            else:
+                w.ext1 = reach
+
+
+def _footprints(drafts: dict[int, Draft], walls: list[Wall], spaces: list[Space]) -> None:
+    """Clear floor polygon of each space: its cells minus every wall body (partial walls stay inside)."""
+    bodies = shapely.union_all([Polygon(w.body()) for w in walls if w.kind != "partial"])
+    for sid, d in drafts.items():
+        cells = shapely.union_all([box(*c) for c in d.cells])
+        clear = shapely.set_precision(cells.difference(bodies), 1e-6)
+        if clear.geom_type != "Polygon":
+            clear = max(getattr(clear, "geoms", [clear]), key=lambda g: g.area)
+        clear = orient(clear.simplify(0), 1.0)
+        spaces[sid].footprint = np.asarray(clear.exterior.coords)[:-1]
+
+
+# -- doors ---------------------------------------------------------------------------------
+def _door_room(w: Wall, width: float) -> tuple[float, float] | None:
+    """The range of door centres along a wall that keeps a door of ``width`` clear of the joints."""
+    lo = max(w.ext0, 0.05) + 0.18 + width / 2
+    hi = w.length - max(w.ext1, 0.05) - 0.18 - width / 2
+    return (lo, hi) if hi >= lo else None
+
+
+def _doors(rng: np.random.Generator, walls: list[Wall], spaces: list[Space], openings: list[Opening],
+           drafts: dict[int, Draft], exterior_door: bool) -> None:
+    """Doors so that every space of the floor is reachable, plus a few extra between rooms."""
+    by_pair: dict[tuple[int, int], list[Wall]] = defaultdict(list)
+    for w in walls:
+        if w.kind == "interior":
+            by_pair[tuple(sorted((w.left, w.right)))].append(w)
+    circ = {sid for sid in drafts if spaces[sid].type in CIRCULATION}
+    parent = {sid: sid for sid in drafts}
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    def best_wall(pair, width):
+        ws = [w for w in by_pair.get(pair, []) if _door_room(w, width)]
+        return max(ws, key=lambda w: w.length) if ws else None
+
+    def add(pair, double=False, leaf=None):
+        a, b = pair
+        width = rng.uniform(1.5, 1.9) if double else rng.uniform(0.8, 1.0)
+        w = best_wall(pair, width)
+        if w is None and double:
+            double, width = False, rng.uniform(0.8, 1.0)
+            w = best_wall(pair, width)
+        if w is None:
+            return False
+        lo, hi = _door_room(w, width)
+        c = rng.uniform(lo, hi)
+        zmax = min(spaces[s].z1 for s in pair) - w.z0 - 0.25
+        h = min(rng.uniform(2.0, 2.2), zmax)
+        if leaf is None:
+            r = rng.random()
+            leaf = "closed" if r < 0.45 else "open" if r < 0.9 else "none"
+        # leaves swing into the room, not the hallway
+        into = b if a in circ and b not in circ else a if b in circ and a not in circ else pair[rng.integers(2)]
+        swing = w.side_of(into)
+        o = Opening(len(openings), "door", w.id, round(c - width / 2, 4), round(c + width / 2, 4), w.z0,
+                    round(w.z0 + h, 4), leaf=leaf, leaves=2 if double else 1, swing=swing,
+                    angle=float(rng.uniform(math.radians(60), math.radians(100))))
+        w.openings.append(o)
+        openings.append(o)
+        parent[find(a)] = find(b)
+        return True
+
+    pairs = sorted(by_pair)
+    # hallways and lobby join each other through wide doors held open
+    for a, b in pairs:
+        if a in circ and b in circ:
+            add((a, b), double=True, leaf=str(rng.choice(["open", "none"])))
+    # every room opens on the circulation it touches (the longest such wall)
+    for sid in sorted(drafts):
+        if sid in circ:
+            continue
+        cands = [p for p in pairs if sid in p and (p[0] in circ or p[1] in circ)]
+        if cands:
+            p = max(cands, key=lambda p: max(w.length for w in by_pair[p]))
+            big = spaces[sid].type in ("conferenceRoom", "openspace") and rng.random() < 0.5
+            add(p, double=big)
+    # whatever is still cut off joins through any neighbour
+    for _ in range(len(drafts)):
+        roots = {find(s) for s in drafts}
+        if len(roots) == 1:
+            break
+        main = find(min(circ)) if circ else find(min(drafts))
+        linked = False
+        for p in pairs:
+            if (find(p[0]) == main) != (find(p[1]) == main):
+                if add(p):
+                    linked = True
+                    break
+        if not linked:
+            break
+    # a few extra doors between neighbouring rooms
+    for p in pairs:
+        if p[0] not in circ and p[1] not in circ and find(p[0]) == find(p[1]) and rng.random() < 0.12:
+            if not any(o for w in by_pair[p] for o in w.openings):
+                add(p)
+    if exterior_door:
+        lobby = [sid for sid in drafts if spaces[sid].type == "lobby"] or sorted(circ)[:1]
+        ext = [w for w in walls if w.kind == "exterior" and lobby and lobby[0] in (w.left, w.right)]
+        ext = [w for w in ext if _door_room(w, 1.8)]
+        if ext:
+            w = max(ext, key=lambda w: w.length)
+            lo, hi = _door_room(w, 1.8)
+            c = rng.uniform(lo, hi)
+            h = min(2.3, spaces[lobby[0]].z1 - w.z0 - 0.3)
+            o = Opening(len(openings), "door", w.id, round(c - 0.9, 4), round(c + 0.9, 4), w.z0,
+                        round(w.z0 + h, 4), leaf="closed", leaves=2, swing=w.side_of(lobby[0]))
+            w.openings.append(o)
+            openings.append(o)
+
+
+def _windows(rng: np.random.Generator, walls: list[Wall], spaces: list[Space], openings: list[Opening],
+             style: dict) -> None:
+    """Regularly spaced windows on exterior walls (fewer in WCs and storage rooms)."""
+    for w in walls:
+        if w.kind != "exterior":
+            continue
+        sid = w.left if w.left >= 0 else w.right
+        sp = spaces[sid]
+        if sp.type in ("WC", "storage") and rng.random() < 0.5:
+            continue
+        width = style["window_width"]
+        period = width + style["window_gap"]
+        lo = w.ext0 + 0.35
+        hi = w.length - w.ext1 - 0.35
+        taken = [(o.s0 - 0.3, o.s1 + 0.3) for o in w.openings]
+        usable = hi - lo
+        n = int((usable + style["window_gap"]) // period)
+        if n < 1:
+            if usable < 0.9:
+                continue
+            n, width = 1, min(width, usable)
+        start = lo + (usable - (n * width + (n - 1) * style["window_gap"])) / 2
+        sill = w.z0 + style["sill"]
+        head = min(sill + style["window_height"], sp.z1 - 0.3)
+        if head - sill < 0.5:
+            continue
+        for k in range(n):
+            s0 = start + k * period
+            s1 = s0 + width
+            if any(s0 < b and s1 > a for a, b in taken):
+                continue
+            o = Opening(len(openings), "window", w.id, round(s0, 4), round(s1, 4), round(sill, 4), round(head, 4))
+            w.openings.append(o)
+            openings.append(o)
+
+
+# -- parts -----------------------------------------------------------------------------------
+def plan_parts(b: Building, part_points: int) -> list[PartSpec]:
+    """Cut every space whose estimated point count exceeds ``part_points`` into slabs; one task each."""
+    parts: list[PartSpec] = []
+    for s in b.spaces:
+        est = structure.estimate_points(s, b.density)
+        n = max(1, math.ceil(est / max(part_points, 1)))
+        fp = s.footprint
+        ext = fp.max(0) - fp.min(0)
+        axis = int(np.argmax(ext))
+        lo, hi = float(fp[:, axis].min()), float(fp[:, axis].max())
+        edges = np.linspace(lo, hi, n + 1)
+        for k in range(n):
+            a = -math.inf if k == 0 else float(edges[k])
+            c = math.inf if k == n - 1 else float(edges[k + 1])
+            parts.append(PartSpec(len(parts), s.id, k, n, axis, a, c, int(est / n)))
+    return parts
