@@ -14,7 +14,7 @@ from tiles.errors import UserError
 def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
              density: float | None = None, yaw: float = 0.0, offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
              format: str = "store", png: str | None = None, client=None, overwrite: bool = False,
-             part_points: int | None = None) -> dict[str, Any]:
+             part_points: int | None = None, storage_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """Generate a synthetic building scan with exact ground truth.
 
     Parameters
@@ -30,6 +30,8 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         Also draw the plan (spaces coloured by ground truth, element boxes) to this PNG.
     client
         A ``distributed.Client``; None generates in this process.
+    storage_options
+        fsspec options when ``out`` is a store URL.
 
     Returns
     -------
@@ -49,7 +51,8 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
     building = plan_building(seed, area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,
                              offset=offset, part_points=part_points)
     if format == "store":
-        _, counts = write_store(building, str(out), client=client, overwrite=overwrite)
+        _, counts = write_store(building, str(out), client=client, overwrite=overwrite,
+                                storage_options=storage_options)
     elif format == "laz":
         counts = write_las(building, str(out), client=client, overwrite=overwrite)
     else:

@@ -92,10 +92,11 @@ def _store_part(job: ScanJob, builder: StoreBuilder):
 
 
 def write_store(building: Building, out: str, *, client=None, overwrite: bool = False,
-                tile_size: float | None = None) -> tuple[TileStore, dict[str, dict[int, int]]]:
+                tile_size: float | None = None,
+                storage_options: dict[str, Any] | None = None) -> tuple[TileStore, dict[str, dict[int, int]]]:
     """Generate the building straight into a tile store; returns it and the point counts."""
     builder = StoreBuilder.create(out, dimensions=store_dimensions(), scale=[SCALE] * 3, offset=building.origin(),
-                                  tile_size=tile_size, overwrite=overwrite)
+                                  tile_size=tile_size, overwrite=overwrite, storage_options=storage_options)
     try:
         jobs = part_jobs(building)
         results = run_tasks(_store_part, jobs, client=client, label="generating points",
