@@ -12,6 +12,7 @@ import contextlib
 import logging
 import os
 import socket
+import ssl
 import sys
 from collections.abc import Iterator
 from urllib.parse import urlparse
@@ -28,7 +29,8 @@ _LOOPBACK = {"localhost", "127.0.0.1", "::1", "", None}
 
 def scheduler_address(scheduler: str | None = None) -> str | None:
     """The address of the existing cluster to use, or None for an embedded one."""
-    return scheduler or config.get("scheduler") or dask.config.get("scheduler-address", None) or None
+    return (scheduler or config.get("scheduler") or dask.config.get("scheduler-address", None)
+            or os.environ.get("DASK_SCHEDULER_ADDRESS") or None)
 
 
 @contextlib.contextmanager
@@ -48,9 +50,10 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
     """
     address = scheduler_address(scheduler)
     if address:
+        security = _security_for(address)
         try:
-            client = Client(address, timeout=config.get("connect-timeout", "20s"))
-        except (OSError, TimeoutError) as exc:
+            client = Client(address, timeout=config.get("connect-timeout", "20s"), security=security)
+        except (OSError, TimeoutError, TypeError, ValueError, ssl.SSLError) as exc:
             raise UserError(address, f"cannot reach the dask scheduler ({type(exc).__name__}: {exc})") from None
         cluster = None
     else:
@@ -76,6 +79,18 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
             cluster.close()
 
 
+def _security_for(address: str):
+    """dask's own security settings (``distributed.comm.tls.*``), checked for a ``tls://`` address."""
+    from distributed.security import Security
+
+    security = Security()
+    if address.startswith("tls://") and not (security.tls_ca_file and security.tls_client_cert):
+        raise UserError(address, "a tls:// scheduler needs TLS certificates: set distributed.comm.tls.ca-file, "
+                                 "distributed.comm.tls.client.cert and distributed.comm.tls.client.key (dask config "
+                                 "file or DASK_DISTRIBUTED__COMM__TLS__CA_FILE=...)")
+    return security
+
+
 def _has_dashboard(client: Client) -> bool:
     try:
         return bool(client.scheduler_info().get("services", {}).get("dashboard"))
@@ -92,14 +107,24 @@ def is_remote(client: Client | None) -> bool:
     if parsed.scheme == "inproc":
         return False
     host = parsed.hostname
-    return host not in _LOOPBACK and host != socket.gethostname() and host != _own_ip()
+    return host not in _LOOPBACK and host != socket.gethostname() and host not in _own_addresses()
 
 
-def _own_ip() -> str | None:
+def _own_addresses() -> set[str]:
+    """This machine's IP addresses (every interface) and the address its host name resolves to."""
+    out: set[str] = set()
     try:
-        return socket.gethostbyname(socket.gethostname())
+        out.add(socket.gethostbyname(socket.gethostname()))
     except OSError:
-        return None
+        pass
+    try:
+        import psutil
+
+        for addrs in psutil.net_if_addrs().values():
+            out.update(a.address.split("%")[0] for a in addrs if a.family in (socket.AF_INET, socket.AF_INET6))
+    except Exception:  # noqa: BLE001 - best effort
+        pass
+    return out
 
 
 def check_reachable(client: Client | None, *locations: str) -> None:

@@ -37,7 +37,8 @@ from tiles.schema import (META_KEY, POINT_INDEX, SCHEMA_VERSION, Dimension, Part
 from tiles.store import TILE_CHUNK, TileStore, _open_group, tile_compressor, tile_name, utc_now
 from tiles.tasks import run_tasks
 
-STAGING_CHUNK = 1 << 16
+#: Bytes per chunk of a part's staging array (a tile's task decompresses only the chunks it needs).
+STAGING_CHUNK = 1 << 18
 
 
 def default_tile_size() -> float:
@@ -117,6 +118,11 @@ class StoreBuilder:
 
     # -- step 1: one task per part ------------------------------------------------------
     @property
+    def row_bytes(self) -> int:
+        """Bytes of one point over all dimensions (``point_index`` included)."""
+        return int(sum(np.dtype(d.dtype).itemsize for d in self.dimensions))
+
+    @property
     def stored_names(self) -> list[str]:
         """The per-point arrays a part must provide (all but ``point_index``)."""
         return [d.name for d in self.dimensions if d.name != POINT_INDEX.name]
@@ -142,13 +148,17 @@ class StoreBuilder:
         ix, iy = self.tile_keys(columns["x"], columns["y"])
         x0, y0 = ix.min(), iy.min()
         key = (ix - x0) * (iy.max() - y0 + 1) + (iy - y0)
-        order = np.argsort(key, kind="stable")
+        # numpy's stable sort of 16-bit keys is a radix sort: O(n) for parts spanning < 65536 tiles
+        order = np.argsort(key.astype(np.uint16) if key.max() < 65536 else key, kind="stable")
         skey = key[order]
         starts = np.flatnonzero(np.r_[True, skey[1:] != skey[:-1]])
         counts = np.diff(np.r_[starts, n])
-        group = _open_group(paths.join(self.build_url, "_staging", f"p{part_id:07d}"),
-                            self.storage_options, mode="w")
+        # One staging array per part: for each tile run (in key order) the run's values of every
+        # dimension in turn, so that a tile's task reads one contiguous byte range per part.
+        row = self.row_bytes
+        blob = np.empty(n * row, dtype=np.uint8)
         sorted_cols: dict[str, np.ndarray] = {}
+        col_off = 0
         for d in self.dimensions:
             if d.name == POINT_INDEX.name:
                 values = order.astype(np.int64)
@@ -156,7 +166,13 @@ class StoreBuilder:
                 values = np.asarray(columns[d.name]).astype(d.dtype, copy=False)[order]
             if d.name in ("x", "y", "z"):
                 sorted_cols[d.name] = values
-            _write_whole(group, d.name, values, staging=True)
+            raw = values.view(np.uint8)
+            size = values.dtype.itemsize
+            for st, ct in zip(starts.tolist(), counts.tolist()):
+                dst = st * row + ct * col_off
+                blob[dst:dst + ct * size] = raw[st * size:(st + ct) * size]
+            col_off += size
+        _write_staging(self, part_id, blob)
         mins = {a: np.minimum.reduceat(sorted_cols[a], starts) for a in "xyz"}
         maxs = {a: np.maximum.reduceat(sorted_cols[a], starts) for a in "xyz"}
         tix, tiy = ix[order[starts]], iy[order[starts]]
@@ -243,25 +259,31 @@ def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int]]], builder
     for part_id, _, count in runs:
         offsets[part_id + 1] = count
     offsets = np.cumsum(offsets)
+    dtypes = [np.dtype(d.dtype) for d in builder.dimensions]
+    row = builder.row_bytes
+    pieces: list[list[np.ndarray]] = [[] for _ in dtypes]
+    for part_id, start, count in runs:
+        raw = zarr.open_array(_staging_url(builder, part_id), **_kw(builder))[start * row:(start + count) * row]
+        off = 0
+        for j, (d, dt) in enumerate(zip(builder.dimensions, dtypes)):
+            a = np.frombuffer(raw, dtype=dt, count=count, offset=off)
+            if d.name == POINT_INDEX.name:
+                a = a + firsts[part_id]
+            pieces[j].append(a)
+            off += count * dt.itemsize
     tile = _open_group(paths.join(builder.build_url, "tiles", tile_name(*key)), builder.storage_options,
                        mode="w")
     n = 0
-    for d in builder.dimensions:
-        pieces = []
-        for part_id, start, count in runs:
-            a = zarr.open_array(_array_url(builder, part_id, d.name), **_kw(builder))[start:start + count]
-            if d.name == POINT_INDEX.name:
-                a = a + firsts[part_id]
-            pieces.append(a)
-        values = np.concatenate(pieces)
+    for d, p in zip(builder.dimensions, pieces):
+        values = np.concatenate(p)
         n = len(values)
-        _write_whole(tile, d.name, values, staging=False)
-    _write_whole(tile, "part_offsets", offsets, staging=False)
+        _write_whole(tile, d.name, values)
+    _write_whole(tile, "part_offsets", offsets)
     return n
 
 
-def _array_url(builder: StoreBuilder, part_id: int, name: str) -> str:
-    url = paths.join(builder.build_url, "_staging", f"p{part_id:07d}", name)
+def _staging_url(builder: StoreBuilder, part_id: int) -> str:
+    url = paths.join(builder.build_url, "_staging", f"p{part_id:07d}")
     return paths.local_path(url) if paths.is_local(url) else url
 
 
@@ -272,19 +294,33 @@ def _kw(builder: StoreBuilder) -> dict[str, Any]:
     return kw
 
 
-def _write_whole(group: zarr.Group, name: str, values: np.ndarray, *, staging: bool) -> None:
-    """Create an array and write all of it from this one task."""
-    n = len(values)
-    if staging:
-        inner = STAGING_CHUNK
-        shard = max(inner, -(-n // inner) * inner)
-        arr = group.create_array(name, shape=(n,), dtype=values.dtype, chunks=(inner,), shards=(shard,),
-                                 compressors=zarr.codecs.BloscCodec(cname="lz4", clevel=1, shuffle="shuffle"))
-    else:
-        arr = group.create_array(name, shape=(n,), dtype=values.dtype, chunks=(min(TILE_CHUNK, max(n, 1)),),
-                                 compressors=tile_compressor())
+def staging_compressors() -> list:
+    """The staging codec (``buildingparser.ingest.staging-codec``): ``none`` or a Blosc compressor name."""
+    name = str(dask.config.get("buildingparser.ingest.staging-codec", "lz4"))
+    if name == "none":
+        return []
+    return [zarr.codecs.BloscCodec(cname=name, clevel=1, shuffle="noshuffle")]
+
+
+def _write_staging(builder: StoreBuilder, part_id: int, blob: np.ndarray) -> None:
+    """Write a part's staging bytes as one sharded array (one shard file, chunks read independently)."""
+    n = len(blob)
+    inner = STAGING_CHUNK
+    shard = max(inner, -(-n // inner) * inner)
+    kw: dict[str, Any] = {}
+    if not paths.is_local(builder.build_url):
+        kw["storage_options"] = builder.storage_options
+    arr = zarr.create_array(_staging_url(builder, part_id), shape=(n,), dtype=np.uint8, chunks=(inner,),
+                            shards=(shard,), compressors=staging_compressors(), zarr_format=3,
+                            overwrite=True, **kw)
     if n:
-        arr[:] = values
+        arr[:] = blob
+
+
+def _write_whole(group: zarr.Group, name: str, values: np.ndarray) -> None:
+    """Create a tile array and write all of it from this one task."""
+    n = len(values)
+    group.create_array(name, data=values, chunks=(min(TILE_CHUNK, max(n, 1)),), compressors=tile_compressor())
 
 
 def _looks_like_store(url: str) -> bool:

@@ -240,6 +240,23 @@ def build_header(store: TileStore, layout: Layout) -> tuple[laspy.LasHeader, lis
     return header, evlrs
 
 
+def precheck(out: str, *, overwrite: bool = False, storage_options: dict[str, Any] | None = None) -> str:
+    """Check the output name before any work: a .las/.laz name, not existing (unless ``overwrite``)."""
+    out = paths.normalize(out)
+    ext = os.path.splitext(out.lower())[1]
+    if ext not in EXTENSIONS:
+        raise UserError(out, f"unknown extension {ext or '(none)'!r}: export writes .las or .laz")
+    if paths.exists(out, storage_options) and not overwrite:
+        raise UserError(out, "already exists: choose another name or pass --overwrite")
+    if paths.is_local(out):
+        parent = os.path.dirname(paths.local_path(out))
+        if not os.path.isdir(parent):
+            raise UserError(out, f"folder {parent} does not exist")
+        if os.path.isdir(paths.local_path(out)):
+            raise UserError(out, "is a folder")
+    return out
+
+
 def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = False,
            point_format: int | None = None, storage_options: dict[str, Any] | None = None,
            window: int | None = None) -> dict[str, Any]:
@@ -266,16 +283,8 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     t0 = time.perf_counter()
     if not isinstance(store, TileStore):
         store = TileStore(store, storage_options)
-    out = paths.normalize(out)
+    out = precheck(out, overwrite=overwrite, storage_options=storage_options)
     ext = os.path.splitext(out.lower())[1]
-    if ext not in EXTENSIONS:
-        raise UserError(out, f"unknown extension {ext or '(none)'!r}: export writes .las or .laz")
-    if paths.exists(out, storage_options) and not overwrite:
-        raise UserError(out, "already exists: choose another name or pass --overwrite")
-    if paths.is_local(out):
-        parent = os.path.dirname(paths.local_path(out))
-        if not os.path.isdir(parent):
-            raise UserError(out, f"folder {parent} does not exist")
     meta = store.meta
     layout = plan_layout(store, point_format)
     header, evlrs = build_header(store, layout)
@@ -369,3 +378,20 @@ def _software() -> str:
         return f"buildingparser {version('buildingparser')}"[:32]
     except Exception:  # noqa: BLE001
         return "buildingparser"
+
+
+def gather_points(store: TileStore, names: list[str] | None = None) -> dict[str, np.ndarray]:
+    """Every point of a store in input order, by dimension (all of them by default).
+
+    Loads the whole store in memory: for small stores (tests, notebooks); use
+    :func:`export` or per-tile reads for large ones.
+    """
+    meta = store.meta
+    names = [d.name for d in meta.dimensions if d.name != "point_index"] if names is None else list(names)
+    pieces: dict[str, list[np.ndarray]] = {n: [] for n in [*names, "point_index"]}
+    for t in meta.tiles:
+        for n, v in store.read(t, pieces).items():
+            pieces[n].append(v)
+    cols = {n: np.concatenate(v) for n, v in pieces.items()}
+    order = np.argsort(cols.pop("point_index"), kind="stable")
+    return {n: v[order] for n, v in cols.items()}

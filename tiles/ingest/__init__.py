@@ -47,7 +47,7 @@ from tiles.tasks import run_tasks
 
 LAS_EXTENSIONS = (".las", ".laz")
 
-__all__ = ["ingest", "open_sources", "IngestReport"]
+__all__ = ["ingest", "open_sources", "precheck", "IngestReport"]
 
 
 def default_part_points() -> int:
@@ -90,6 +90,22 @@ def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None 
     if not readers:
         raise UserError(None, "no input given")
     return readers
+
+
+def precheck(sources: Sequence[str], store: str, *, overwrite: bool = False,
+             storage_options: dict[str, Any] | None = None) -> None:
+    """Cheap checks before any cluster starts: the inputs exist, the store does not (unless ``overwrite``)."""
+    if not sources:
+        raise UserError(None, "no input given")
+    store = paths.normalize(store)
+    for src in sources:
+        path = paths.normalize(src)
+        if path == store:
+            raise UserError(store, "the store cannot be one of the inputs")
+        if not paths.exists(path, storage_options):
+            raise UserError(path, "no such file or folder")
+    if paths.exists(store, storage_options) and not overwrite:
+        raise UserError(store, "already exists: choose another name or pass --overwrite")
 
 
 def choose_grid(readers: list[Reader]) -> Quantization:

@@ -175,9 +175,6 @@ class LasReader(Reader):
         lv = lazrs.LazVlr(self.laszip_vlr)
         f.seek(self.offset_to_points)
         table_offset = int.from_bytes(f.read(8), "little", signed=True)
-        if table_offset in (-1, 0):
-            self.chunks = None  # no chunk table: sequential decode
-            return
         if table_offset >= size:
             raise UserError(self.path, f"truncated: the LAZ chunk table should start at byte {table_offset:,} "
                                        f"but the file has {size:,} bytes")
@@ -185,7 +182,10 @@ class LasReader(Reader):
         try:
             table = lazrs.read_chunk_table(f, lv)
         except Exception as exc:  # noqa: BLE001 - lazrs raises its own errors
-            raise UserError(self.path, f"corrupt LAZ chunk table ({exc})") from None
+            if table_offset in (-1, 0):  # written without a chunk table: one task decodes it in order
+                table = None
+            else:
+                raise UserError(self.path, f"corrupt LAZ chunk table ({exc})") from None
         if table is None:
             self.chunks = None
             return
