@@ -312,7 +312,7 @@ def _bookcases(p: Placer, n: int, low_share: float = 0.3) -> None:
         h = rng.uniform(0.75, 1.1) if rng.random() < low_share else rng.uniform(1.8, 2.2)
         h = min(h, p.space.z1 - p.space.z0 - 0.1)
         rgb = C.pick(rng, C.BOOKCASES)
-        p.against_wall("bookcase", lambda: bookcase(rng, w, d, h, rgb), w, d, h)
+        p.against_wall("bookcase", lambda: bookcase(rng, w, d, h, rgb), w, d, h, gap=0.0)
 
 
 def _board(p: Placer, width=(1.2, 2.4), edge=None) -> None:
@@ -442,7 +442,7 @@ def _hallway(p: Placer) -> None:
         if r < 0.25 and width >= 2.1:
             w, d, h = rng.uniform(0.8, 1.2), rng.uniform(0.3, 0.4), rng.uniform(0.9, 2.0)
             rgb = C.pick(rng, C.BOOKCASES)
-            p.against_wall("bookcase", lambda: bookcase(rng, w, d, h, rgb), w, d, h)
+            p.against_wall("bookcase", lambda: bookcase(rng, w, d, h, rgb), w, d, h, gap=0.0)
         elif r < 0.55:
             _board(p, (0.8, 1.6))
         elif r < 0.85:

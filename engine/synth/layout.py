@@ -60,9 +60,15 @@ class FloorLayout:
     rows: list[Row]
 
 
-def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = None,
-                 lobby: bool = True) -> FloorLayout:
-    """A layout of about ``area`` m^2 (centre-line rectangle) with ``target`` spaces if given."""
+def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = None, lobby: bool = True,
+                 outline: tuple[float, float] | None = None) -> FloorLayout:
+    """A layout of about ``area`` m^2 (centre-line rectangle) with ``target`` spaces if given.
+
+    ``outline`` (length, depth) fixes the rectangle (upper floors of a building): the
+    band depths drawn are then scaled to fill it.
+    """
+    if outline is not None:
+        area = outline[0] * outline[1]
     bands = max(1, round(math.sqrt(area / 560.0)))
     single = area < 110  # a single-loaded corridor: one row of rooms beside the hallway
     ys: list[tuple[str, float]] = []  # ("room" | "hall", depth) from y = 0 up
@@ -72,7 +78,10 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
         if not single:
             ys.append(("room", rng.uniform(4.2, 7.5)))
     depth = sum(d for _, d in ys)
-    length = round(max(area / depth, 6.0), 2)
+    if outline is not None:
+        ys = [(k, d * outline[1] / depth) for k, d in ys]
+        depth = outline[1]
+    length = round(max(area / depth, 6.0), 2) if outline is None else outline[0]
     # y extents
     rows: list[Row] = []
     halls: list[tuple[float, float]] = []
@@ -85,20 +94,22 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
             above_is_hall = i + 1 < len(ys) and ys[i + 1][0] == "hall"
             rows.append(Row(y0, y1, 1 if above_is_hall else -1))
         y += d
-    depth = round(y, 3)
+    depth = round(y, 3) if outline is None else outline[1]
     drafts: list[Draft] = []
     blocked: dict[int, list[tuple[float, float]]] = {i: [] for i in range(len(rows))}
     hall_x0 = {i: 0.0 for i in range(len(halls))}
 
-    # lobby: the first metres of band 0, across its rows and hallway
-    if lobby and length >= 14:
-        lb = round(rng.uniform(6.0, min(12.0, length / 3)), 2)
+    # lobby: the first metres of band 0, its hallway and the rows beside it while it stays within 15 m deep
+    if lobby and length >= 20:
+        lb = round(float(rng.uniform(6.0, min(12.0, length / 3))), 2)
         band_rows = [i for i, r in enumerate(rows) if _band_of(r, halls) == 0]
-        y0 = min(rows[i].y0 for i in band_rows)
-        y1 = max(rows[i].y1 for i in band_rows)
+        y0, y1 = halls[0]
+        for i in sorted(band_rows, key=lambda i: rows[i].y1 - rows[i].y0):
+            r = rows[i]
+            if max(y1, r.y1) - min(y0, r.y0) <= 15.0:
+                y0, y1 = min(y0, r.y0), max(y1, r.y1)
+                blocked[i].append((0.0, lb))
         drafts.append(Draft("lobby", [(0.0, y0, lb, y1)], simple=False))
-        for i in band_rows:
-            blocked[i].append((0.0, lb))
         hall_x0[0] = lb
 
     # cross hallways between neighbouring bands
@@ -110,7 +121,7 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
         for k in range(n_cross):
             lo = length * k / n_cross + 3.0
             hi = length * (k + 1) / n_cross - 3.0 - width
-            x0 = round(rng.uniform(lo, max(lo, hi)), 2)
+            x0 = round(float(rng.uniform(lo, max(lo, hi))), 2)
             drafts.append(Draft("hallway", [(x0, lo_hall[1], x0 + width, hi_hall[0])], simple=False))
             for i in between:
                 blocked[i].append((x0, x0 + width))
@@ -124,7 +135,7 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
         if n_seg > 1:
             cuts[1:-1] += rng.uniform(-3, 3, n_seg - 1)
         for a, c in zip(cuts[:-1], cuts[1:]):
-            drafts.append(Draft("hallway", [(round(a, 3), y0, round(c, 3), y1)], simple=False))
+            drafts.append(Draft("hallway", [(round(float(a), 3), y0, round(float(c), 3), y1)], simple=False))
 
     # rows of rooms between the blocked intervals
     for i, r in enumerate(rows):
@@ -192,8 +203,9 @@ def _reshape(rng: np.random.Generator, drafts: list[Draft], rows: list[Row]) -> 
     """Make one open-plan space and one or two L-shaped rooms where the rows allow."""
     pairs = _neighbours_in_row(drafts)
     # open plan: two or three neighbours with partial walls between them
+    n_simple = sum(1 for d in drafts if d.simple and d.type == "room")
     runs = []
-    for i, j in pairs:
+    for i, j in pairs if n_simple >= 5 else []:
         w = drafts[i].width + drafts[j].width
         if 7.0 <= w <= ROOM_MAX:
             runs.append((i, j))
@@ -215,7 +227,7 @@ def _reshape(rng: np.random.Generator, drafts: list[Draft], rows: list[Row]) -> 
     pairs = [(i, j) for i, j in _neighbours_in_row(drafts) if i not in removed and j not in removed]
     rng.shuffle(pairs)
     made, used = 0, set()
-    for i, j in pairs:
+    for i, j in pairs if n_simple >= 3 else []:
         if made >= (1 if len(pairs) < 8 else 2):
             break
         if i in used or j in used:
@@ -253,12 +265,13 @@ def _adjust_count(rng: np.random.Generator, drafts: list[Draft], target: int) ->
             return
         if n < target:
             cands = [(d.width, i) for i, d in enumerate(drafts) if d.simple and d.type == "room"
-                     and d.width >= 2 * (ROOM_MIN + 0.3)]
+                     and d.width >= 2 * ROOM_MIN + 0.2]
             if not cands:
                 return
             _, i = max(cands)
             x0, y0, x1, y1 = drafts[i].cells[0]
-            xm = round(x0 + (x1 - x0) * rng.uniform(0.4, 0.6), 3)
+            lo, hi = max(0.4, ROOM_MIN / (x1 - x0)), min(0.6, 1 - ROOM_MIN / (x1 - x0))
+            xm = round(x0 + (x1 - x0) * rng.uniform(lo, max(lo, hi)), 3)
             drafts[i].cells = [(x0, y0, xm, y1)]
             drafts.insert(i + 1, Draft("room", [(xm, y0, x1, y1)], row=drafts[i].row))
         else:

@@ -72,13 +72,15 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     floors = int(floors)
     if floors < 1:
         raise UserError(None, f"floors must be at least 1, not {floors}")
-    if rooms is not None and int(rooms) < floors:
-        raise UserError(None, f"rooms must be at least one per floor ({floors}), not {rooms}")
+    if rooms is not None and int(rooms) < 2 * floors:
+        raise UserError(None, f"rooms must be at least two per floor (a hallway and a room): "
+                              f"{2 * floors} for {floors} floor(s), not {rooms}")
     density = float(dask.config.get("buildingparser.synth.density")) if density is None else float(density)
     if not (density > 0 and math.isfinite(density)):
         raise UserError(None, f"density must be a positive number of points per m^2, not {density}")
+    area_given = area_m2 is not None
     if area_m2 is None:
-        area_m2 = (float(rooms) * AREA_PER_SPACE if rooms is not None
+        area_m2 = (max(float(rooms) * AREA_PER_SPACE, MIN_AREA_PER_FLOOR * floors) if rooms is not None
                    else float(dask.config.get("buildingparser.synth.area-m2")))
     area_m2 = float(area_m2)
     if not (math.isfinite(area_m2) and area_m2 >= MIN_AREA_PER_FLOOR * floors):
@@ -92,11 +94,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     brng = rng_for(seed, S_BUILDING)
     style = colours.building_style(brng)
     ext_t = round(brng.uniform(0.25, 0.35), 3)
-    per_floor = [rooms // floors + (1 if f < rooms % floors else 0) for f in range(floors)] if rooms else None
-    layout_seed = rng_for(seed, S_FLOOR, 0)
-    footprint_layout = floor_layout(layout_seed, area_m2 / floors,
-                                    target=per_floor[0] if per_floor else None, lobby=True)
-    length, depth = footprint_layout.length, footprint_layout.depth
+    layouts = _floor_layouts(seed, floors, area_m2, rooms, area_given)
+    length, depth = layouts[0].length, layouts[0].depth
 
     spaces: list[Space] = []
     walls: list[Wall] = []
@@ -105,18 +104,14 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     counters: dict[str, int] = defaultdict(int)
     z = 0.0
     for f in range(floors):
-        frng = rng_for(seed, S_FLOOR, f, 1)
-        if f == 0:
-            lay = footprint_layout
-        else:  # same outline, its own rooms
-            lay = floor_layout(rng_for(seed, S_FLOOR, f), length * depth,
-                               target=per_floor[f] if per_floor else None, lobby=False)
-            lay = _fit_outline(lay, length, depth)
+        frng = rng_for(seed, S_FLOOR, f, 1000)
+        lay = layouts[f]
         base_h = round(frng.uniform(2.7, 3.3), 3)
         first = len(spaces)
         for d in lay.drafts:
             spaces.append(_new_space(d, len(spaces), f, z, base_h, frng, counters))
         drafts = {first + i: d for i, d in enumerate(lay.drafts)}
+        _ensure_wc(spaces[first:], counters)
         floor_walls = _walls(drafts, f, z, spaces, frng, ext_t, len(walls), length, depth)
         walls.extend(floor_walls)
         _footprints(drafts, floor_walls, spaces)
@@ -125,11 +120,10 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         ceiling_max = max(spaces[i].z1 for i in drafts) - z
         plenum = frng.uniform(0.1, 0.6)
         slab = frng.uniform(0.2, 0.4)
+        nxt = round(z + ceiling_max + plenum + slab, 3)
         top = f == floors - 1
-        floor_infos.append(FloorInfo(f, z, z + ceiling_max,
-                                     (z + ceiling_max + plenum, z + ceiling_max + plenum + slab) if not top else
-                                     (z + ceiling_max + plenum, z + ceiling_max + plenum)))
-        z = round(z + ceiling_max + plenum + slab, 3)
+        floor_infos.append(FloorInfo(f, z, z + ceiling_max, (nxt - slab, nxt if not top else nxt - slab)))
+        z = nxt
 
     for w in walls:
         for o in w.openings:
@@ -165,15 +159,31 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     return b
 
 
-def _fit_outline(lay, length: float, depth: float):
-    """Stretch an upper floor's layout onto the ground floor's outline (same building)."""
-    sx, sy = length / lay.length, depth / lay.depth
-    for d in lay.drafts:
-        d.cells = [(round(a * sx, 3), round(b * sy, 3), round(c * sx, 3), round(e * sy, 3)) for a, b, c, e in d.cells]
-        d.partials = [((round(p[0] * sx, 3), round(p[1] * sy, 3)), (round(q[0] * sx, 3), round(q[1] * sy, 3)))
-                      for p, q in d.partials]
-    lay.length, lay.depth = length, depth
-    return lay
+def _floor_layouts(seed: int, floors: int, area_m2: float, rooms: int | None, area_given: bool) -> list:
+    """One layout per floor, all on the ground floor's outline, each with its share of ``rooms`` if given.
+
+    When only ``rooms`` is given, the ground floor's area is adjusted (a few
+    tries) until the layout can hold its share; upper floors retry with new draws.
+    """
+    targets = [rooms // floors + (1 if f < rooms % floors else 0) for f in range(floors)] if rooms else [None] * floors
+    layouts: list = []
+    area = area_m2 / floors
+    outline = None
+    for f, target in enumerate(targets):
+        best = None
+        for attempt in range(12):
+            lay = floor_layout(rng_for(seed, S_FLOOR, f, attempt), area, target=target, lobby=(f == 0),
+                               outline=outline)
+            n = len(lay.drafts)
+            if best is None or abs(n - target) < abs(len(best.drafts) - target):
+                best = lay
+            if target is None or n == target:
+                break
+            if outline is None and not area_given:
+                area = max(area * float(np.clip(target / n, 0.8, 1.3)), MIN_AREA_PER_FLOOR)
+        layouts.append(best)
+        outline = (best.length, best.depth)
+    return layouts
 
 
 TYPE_NAMES = {"office": "office", "conferenceRoom": "conferenceRoom", "hallway": "hallway", "lobby": "lobby",
@@ -210,6 +220,18 @@ def _new_space(d: Draft, sid: int, floor: int, z: float, base_h: float, rng: np.
     elif rng.random() < 0.2:
         h = base_h - rng.uniform(0.0, 0.1)
     return Space(sid, f"{t}_{counters[t]}", t, floor, list(d.cells), z0=z, z1=round(z + h, 3))
+
+
+def _ensure_wc(floor_spaces: list[Space], counters: dict[str, int]) -> None:
+    """Every floor with five rooms or more has a WC: the smallest office becomes one."""
+    rooms = [s for s in floor_spaces if s.type not in CIRCULATION]
+    if len(rooms) < 5 or any(s.type == "WC" for s in rooms):
+        return
+    offices = [s for s in rooms if s.type in ("office", "storage") and len(s.cells) == 1]
+    if offices:
+        s = min(offices, key=lambda s: ((s.cells[0][2] - s.cells[0][0]) * (s.cells[0][3] - s.cells[0][1]), s.id))
+        counters["WC"] += 1
+        s.type, s.name = "WC", f"WC_{counters['WC']}"
 
 
 # -- walls ---------------------------------------------------------------------------------
