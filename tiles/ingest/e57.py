@@ -133,7 +133,7 @@ class E57Reader(Reader):
         if scan["intensity"]:
             dtypes["intensity"] = "d"
         if scan["grid"]:
-            dtypes.update({"rowIndex": "u4", "columnIndex": "u4"})
+            dtypes.update({"rowIndex": "q", "columnIndex": "q"})  # libe57 buffers: b B h H l L q, f d
         if scan["invalid"]:
             dtypes[scan["invalid"]] = "i1"
         want = {d.name for d in self.dimensions}
@@ -197,8 +197,9 @@ class E57Reader(Reader):
                 cols["intensity"] = np.zeros(m, np.uint16)
         cols["scan_index"] = np.full(m, scan["index"], dtype=np.uint16)
         if "row_index" in want:
-            cols["row_index"] = data["rowIndex"][keep] if scan["grid"] else np.zeros(m, np.uint32)
-            cols["column_index"] = data["columnIndex"][keep] if scan["grid"] else np.zeros(m, np.uint32)
+            cols["row_index"] = data["rowIndex"][keep].astype(np.uint32) if scan["grid"] else np.zeros(m, np.uint32)
+            cols["column_index"] = (data["columnIndex"][keep].astype(np.uint32) if scan["grid"]
+                                    else np.zeros(m, np.uint32))
         return PartResult(cols, {"scan": scan["index"], "records": n, "invalid": int(n - m)})
 
     def source_info(self, stats: list[dict[str, Any]]) -> dict[str, Any]:

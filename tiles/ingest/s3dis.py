@@ -201,7 +201,7 @@ class S3DISReader(Reader):
                 inst += 1
 
     def plan(self, part_points: int) -> list[Any]:
-        step = max(1 << 16, int(part_points * self.layout.bytes_per_line))
+        step = max(1024, int(part_points * self.layout.bytes_per_line))
         specs, cur, used = [], [], 0
         for seg in self._segments(step):
             cur.append(seg)

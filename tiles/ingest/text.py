@@ -349,7 +349,7 @@ class TextReader(Reader):
         return self.layout.point
 
     def plan(self, part_points: int) -> list[Any]:
-        step = max(1 << 16, int(part_points * self.layout.bytes_per_line))
+        step = max(1024, int(part_points * self.layout.bytes_per_line))
         return [(s, min(s + step, self.size)) for s in range(self.layout.first, self.size, step)] or \
             [(self.layout.first, self.size)]
 

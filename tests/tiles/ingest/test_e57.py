@@ -1,0 +1,80 @@
+"""E57 ingest: every scan with its pose applied, invalid records counted, streamed in parts."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tiles.export import gather_points
+from tiles.ingest import ingest
+
+pye57 = pytest.importorskip("pye57")
+
+
+def _quaternion_z(angle):
+    return np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
+
+
+def _write_e57(path, seed=0):
+    """Two structured scans with colour, intensity, grid indices, some invalid records and different poses."""
+    rng = np.random.default_rng(seed)
+    scans = []
+    with pye57.E57(str(path), mode="w") as e:
+        for k, (angle, shift) in enumerate([(0.3, [10.0, 5.0, 1.0]), (-1.2, [2.0, -4.0, 0.5])]):
+            rows, cols = 40, 30 + 10 * k
+            n = rows * cols
+            data = {
+                "cartesianX": rng.uniform(-5, 5, n), "cartesianY": rng.uniform(-5, 5, n),
+                "cartesianZ": rng.uniform(0, 3, n),
+                "intensity": rng.uniform(0, 1, n),
+                "colorRed": rng.integers(0, 256, n).astype(np.uint8),
+                "colorGreen": rng.integers(0, 256, n).astype(np.uint8),
+                "colorBlue": rng.integers(0, 256, n).astype(np.uint8),
+                "rowIndex": np.repeat(np.arange(rows), cols).astype(np.int32),
+                "columnIndex": np.tile(np.arange(cols), rows).astype(np.int32),
+                "cartesianInvalidState": (rng.uniform(0, 1, n) < 0.1).astype(np.int8) * 2,
+            }
+            e.write_scan_raw(data, rotation=_quaternion_z(angle), translation=np.array(shift), name=f"scan {k}")
+            scans.append(data)
+    return scans
+
+
+def test_scans_are_read_with_their_pose_in_parts(tmp_path):
+    path = tmp_path / "two.e57"
+    _write_e57(path)
+    with pytest.warns(UserWarning, match="flagged invalid"):
+        s = ingest([str(path)], str(tmp_path / "s.zarr"), part_points=500)
+    ref = pye57.E57(str(path))
+    expected = [ref.read_scan(i, intensity=True, colors=True, row_column=True, transform=True) for i in range(2)]
+    n_valid = sum(len(d["cartesianX"]) for d in expected)
+    assert s.meta.point_count == n_valid
+    assert len(s.meta.parts) == 3 + 4  # 1200 and 1600 records in parts of 500
+    got = gather_points(s)
+    xyz = np.stack([got[a] * 1e-4 + o for a, o in zip("xyz", s.meta.offset)], axis=1)
+    want = np.concatenate([np.stack([d["cartesianX"], d["cartesianY"], d["cartesianZ"]], axis=1) for d in expected])
+    np.testing.assert_allclose(xyz, want, atol=6e-5)
+    np.testing.assert_array_equal(got["red"], np.concatenate([d["colorRed"] for d in expected]))
+    np.testing.assert_array_equal(got["row_index"], np.concatenate([d["rowIndex"] for d in expected]))
+    np.testing.assert_array_equal(got["scan_index"], np.repeat([0, 1], [len(d["cartesianX"]) for d in expected]))
+    info = s.meta.sources[0].info
+    assert info["invalid_records"] == 2800 - n_valid > 0
+    assert [sc["structured"] for sc in info["scans"]] == [True, True]
+    assert s.meta.color_depth == 8 and s.meta.dimension("intensity").dtype == "uint16"
+
+
+def test_missing_pye57_gives_a_clear_error(tmp_path, monkeypatch):
+    import builtins
+
+    from tiles.errors import UserError
+
+    path = tmp_path / "one.e57"
+    _write_e57(path)
+    real_import = builtins.__import__
+
+    def no_pye57(name, *a, **k):
+        if name == "pye57":
+            raise ImportError("no pye57")
+        return real_import(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_pye57)
+    with pytest.raises(UserError, match=r"pip install 'buildingparser\[e57\]'"):
+        ingest([str(path)], str(tmp_path / "s.zarr"))
