@@ -23,7 +23,11 @@ Choices made here, beyond the paper's text:
   the unit cube, then two additions: a constant (a linear function of
   ``|P_u - P_v|`` alone cannot penalise close pairs without also rewarding far
   ones; the constant lets it pay off at a learned distance) and the unit-cube
-  IoU of the two boxes (what duplicates look like).
+  IoU of the two boxes (what duplicates look like).  Every ``Phi_uv`` is
+  divided by ``sum_e k_e`` (:func:`edge_scale`), so that a node's pairwise
+  terms add up to a mean over its neighbours, on the scale of its unary term,
+  rather than a sum; a constant factor, so the model is the same, but the
+  S-SVM (:mod:`engine.ssvm`) is far better conditioned.
 * **Edge weights are indexed per unordered class pair** ``{c(u), c(v)}``: 12
   classes give 78 weight vectors.  The edge is oriented so that ``u`` has the
   smaller class code; for a same-class pair the two halves are symmetrised
@@ -411,7 +415,13 @@ def build_graph(proposals: list[Proposal], k: np.ndarray, grid: int, *, max_node
         bu[same], bv[same], su[same], sv[same] = bm, bm, sm, sm
     phi = np.concatenate([bu, bv, su, sv, np.abs(pos[u] - pos[v]), np.ones((len(u), 1)),
                           box_iou_unit(pos[u], size[u], pos[v], size[v])[:, None]], axis=1)
+    phi /= edge_scale(k)
     return CRFGraph(cls, score, edges.astype(np.int64), pairs, phi, grid)
+
+
+def edge_scale(k: np.ndarray) -> float:
+    """What every edge feature vector is divided by: ``sum_e k_e`` (at least 1)."""
+    return float(max(1, int(np.sum(k))))
 
 
 def box_iou_unit(p1: np.ndarray, s1: np.ndarray, p2: np.ndarray, s2: np.ndarray) -> np.ndarray:

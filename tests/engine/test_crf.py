@@ -7,8 +7,8 @@ import warnings
 import numpy as np
 import pytest
 
-from engine.crf import (CLASS_PAIRS, CRFSettings, CRFWeights, apply_crf, build_graph, edge_feature_size, energies,
-                        energy, joint_feature, pair_index, select_elements, solve_ip)
+from engine.crf import (CLASS_PAIRS, CRFSettings, CRFWeights, apply_crf, build_graph, edge_feature_size,
+                        edge_scale, energies, energy, joint_feature, pair_index, select_elements, solve_ip)
 from engine.crf_scenes import make_scenes
 from engine.proposals import Proposal
 from tiles.classes import CLASS_CODES
@@ -115,7 +115,8 @@ def test_solver_limit_falls_back_with_a_warning():
 
 def duplicate_penalty(grid=K):
     w = CRFWeights.new(grid, k=3)
-    w.block(WALL, WALL, "iou")[:] = -8.0  # two walls where one is: at most one of them
+    # two walls where one is: at most one of them (features are divided by sum_e k_e: undo it)
+    w.block(WALL, WALL, "iou")[:] = -8.0 * edge_scale(w.k)
     return w
 
 
@@ -138,7 +139,7 @@ def test_context_picks_the_wall_that_holds_the_door():
     b = prop(WALL, [0.02, 0, 0], [0.05, 1, 1], 0.8)
     door = prop(DOOR, [0.02, 0.4, 0], [0.05, 0.1, 0.7], 0.5)
     w = duplicate_penalty()
-    w.block(WALL, DOOR, "iou")[:] = 20.0  # a door inside a wall supports that wall
+    w.block(WALL, DOOR, "iou")[:] = 20.0 * edge_scale(w.k)  # a door inside a wall supports that wall
     kept, _ = select_elements([a, b, door], w)
     assert kept == [b, door]
     w.block(WALL, DOOR, "iou")[:] = 0.0
@@ -185,13 +186,13 @@ def test_same_class_features_do_not_depend_on_order():
     g4 = build_graph([a, t], np.full(12, 1), K)
     np.testing.assert_allclose(g3.phi, g4.phi)  # oriented by class: the table (7) is u, the chair (8) v
     k3 = K ** 3
-    np.testing.assert_allclose(g3.phi[0, 2 * k3:2 * k3 + 3], t.size)
+    np.testing.assert_allclose(g3.phi[0, 2 * k3:2 * k3 + 3] * 12, t.size)  # divided by sum_e k_e = 12
 
 
 def test_graph_bound_leaves_low_scores_to_their_unary():
     props = [prop(WALL, [0.1 * i, 0, 0], [0.05, 1, 1], 1.0 - 0.1 * i) for i in range(6)]
     w = CRFWeights.new(K, k=5)
-    w.block(WALL, WALL, "const")[:] = -10.0  # every pair of walls excludes each other
+    w.block(WALL, WALL, "const")[:] = -10.0 * edge_scale(w.k)  # every pair of walls excludes each other
     kept, info = select_elements(props, w, settings=CRFSettings(max_nodes_per_class=2))
     assert info["edges"] == 1
     # the two best exclude each other; the four outside the graph keep by their positive unary
