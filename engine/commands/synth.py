@@ -74,8 +74,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.cluster import cluster_client
     from engine.synth import generate
+    from engine.synth.plan import check_parameters
+    from engine.synth.writers import precheck
 
     fmt = args.format or ("laz" if args.out.lower().endswith((".las", ".laz")) else "store")
+    check_parameters(area_m2=args.area_m2, rooms=args.rooms, floors=args.floors, density=args.density, yaw=args.yaw,
+                     offset=args.offset)
+    precheck(args.out, fmt, overwrite=args.overwrite, storage_options=args.storage_options)
     with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
         r = generate(args.out, seed=args.seed, area_m2=args.area_m2, rooms=args.rooms, floors=args.floors,
                      density=args.density, yaw=args.yaw, offset=tuple(args.offset), format=fmt, png=args.png,

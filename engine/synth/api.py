@@ -6,9 +6,8 @@ import time
 from typing import Any
 
 from engine.synth.plan import plan_building
-from engine.synth.writers import FORMATS, write_las, write_s3dis, write_store
+from engine.synth.writers import precheck, write_las, write_s3dis, write_store
 from tiles import paths
-from tiles.errors import UserError
 
 
 def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
@@ -39,10 +38,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         ``out``, ``format``, ``points``, ``spaces``, ``elements`` (instances with
         points), ``floor_area_m2``, ``parts``, ``seconds``, ``points_per_second``.
     """
-    if format not in FORMATS:
-        raise UserError(None, f"unknown format {format!r}: choose one of {', '.join(FORMATS)}")
-    if format != "store" and not paths.is_local(str(out)):
-        raise UserError(out, f"format {format} writes local files only: use a local path")
+    precheck(out, format, overwrite=overwrite, storage_options=storage_options)
     if client is not None:
         from engine.cluster import check_reachable
 

@@ -172,8 +172,8 @@ class Placer:
                 if o.kind == "door":
                     reach = 1.1 if o.leaf != "open" else (s1 - s0) / o.leaves + 0.3
                     self._block_strip(ed, s0 - 0.25, s1 + 0.25, max(reach, 1.0), z0, space.z1)
-                else:  # only tall things are kept off windows
-                    self._block_strip(ed, s0 - 0.05, s1 + 0.05, 0.45, o.z0 - 0.05, o.z1)
+                else:  # only tall things (bookcases, not chairs) are kept off windows
+                    self._block_strip(ed, s0 - 0.05, s1 + 0.05, 0.45, o.z0 + 0.2, o.z1)
         for e in space.elements:  # columns, beams, partial walls, lights, door leaves and casings
             for b in e.prims:
                 if isinstance(b, Box):
@@ -399,8 +399,16 @@ def _conference(p: Placer) -> None:
     L = float(np.clip(0.55 * ext[long_ax], 1.6, 5.0))
     W = float(min(rng.uniform(1.0, 1.4), max(0.8, ext[1 - long_ax] - 2.0)))
     yaw = 0.0 if long_ax == 0 else math.pi / 2
-    centre = (lo + hi) / 2 + rng.uniform(-0.2, 0.2, 2)
-    el = p.put("table", table(rng, L, W, 0.74, C.pick(rng, C.TABLES)), centre, yaw)
+    rgb = C.pick(rng, C.TABLES)
+    el = None
+    for attempt in range(16):  # shorter and off-centre when doors or columns are in the way
+        size = np.array([L, W]) if long_ax == 0 else np.array([W, L])
+        slack = np.maximum((ext - size) / 2 - 0.7, 0.0)
+        centre = (lo + hi) / 2 + rng.uniform(-1, 1, 2) * slack * min(1.0, attempt / 4)
+        el = p.put("table", table(rng, L, W, 0.74, rgb), centre, yaw)
+        if el is not None:
+            break
+        L = max(1.6, L * 0.92)
     if el is not None:
         ax = np.array([math.cos(yaw), math.sin(yaw)])
         side = np.array([-math.sin(yaw), math.cos(yaw)])

@@ -239,7 +239,7 @@ def _reshape(rng: np.random.Generator, drafts: list[Draft], rows: list[Row]) -> 
             continue
         if rng.random() < 0.5:  # the L may extend either way
             a, b = b, a
-        near = round(rng.uniform(2.3, depth - 2.6), 3)
+        near = round(rng.uniform(ROOM_MIN, depth - 2.6), 3)
         bx0, _, bx1, _ = b.cells[0]
         if row.hall_side > 0:
             cut = round(row.y1 - near, 3)

@@ -41,6 +41,34 @@ def rng_for(seed: int, *key: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=tuple(int(k) for k in key)))
 
 
+def check_parameters(*, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
+                     density: float | None = None, yaw: float = 0.0,
+                     offset=(0.0, 0.0, 0.0)) -> tuple[float | None, float]:
+    """Refuse impossible building parameters with a one-line :class:`UserError`; returns area and density.
+
+    Cheap: the command line calls it before it starts a cluster.
+    """
+    floors = int(floors)
+    if floors < 1:
+        raise UserError(None, f"floors must be at least 1, not {floors}")
+    if rooms is not None and int(rooms) < 2 * floors:
+        raise UserError(None, f"rooms must be at least two per floor (a hallway and a room): "
+                              f"{2 * floors} for {floors} floor(s), not {rooms}")
+    density = float(dask.config.get("buildingparser.synth.density")) if density is None else float(density)
+    if not (density > 0 and math.isfinite(density)):
+        raise UserError(None, f"density must be a positive number of points per m^2, not {density}")
+    if area_m2 is not None:
+        area_m2 = float(area_m2)
+        if not (math.isfinite(area_m2) and area_m2 >= MIN_AREA_PER_FLOOR * floors):
+            raise UserError(None, f"area must be at least {MIN_AREA_PER_FLOOR:g} m^2 per floor, not {area_m2:g} m^2 "
+                                  f"for {floors} floor(s)")
+    if len(offset) != 3 or not all(math.isfinite(float(v)) for v in offset):
+        raise UserError(None, f"offset must be three finite numbers, not {tuple(offset)}")
+    if not math.isfinite(float(yaw)):
+        raise UserError(None, f"yaw must be a finite number of degrees, not {yaw}")
+    return area_m2, density
+
+
 def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
                   density: float | None = None, yaw: float = 0.0,
                   offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -69,25 +97,13 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     part_points
         Largest estimated point count of one scan task; a bigger space is cut into pieces.
     """
+    area_m2, density = check_parameters(area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,
+                                        offset=offset)
     floors = int(floors)
-    if floors < 1:
-        raise UserError(None, f"floors must be at least 1, not {floors}")
-    if rooms is not None and int(rooms) < 2 * floors:
-        raise UserError(None, f"rooms must be at least two per floor (a hallway and a room): "
-                              f"{2 * floors} for {floors} floor(s), not {rooms}")
-    density = float(dask.config.get("buildingparser.synth.density")) if density is None else float(density)
-    if not (density > 0 and math.isfinite(density)):
-        raise UserError(None, f"density must be a positive number of points per m^2, not {density}")
     area_given = area_m2 is not None
     if area_m2 is None:
         area_m2 = (max(float(rooms) * AREA_PER_SPACE, MIN_AREA_PER_FLOOR * floors) if rooms is not None
                    else float(dask.config.get("buildingparser.synth.area-m2")))
-    area_m2 = float(area_m2)
-    if not (math.isfinite(area_m2) and area_m2 >= MIN_AREA_PER_FLOOR * floors):
-        raise UserError(None, f"area must be at least {MIN_AREA_PER_FLOOR:g} m^2 per floor, not {area_m2:g} m^2 "
-                              f"for {floors} floor(s)")
-    if len(offset) != 3 or not all(math.isfinite(float(v)) for v in offset):
-        raise UserError(None, f"offset must be three finite numbers, not {offset}")
     part_points = int(part_points or dask.config.get("buildingparser.synth.part-points"))
     frame = Frame(math.radians(float(yaw)), tuple(float(v) for v in offset))
 

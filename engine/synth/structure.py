@@ -206,8 +206,7 @@ def _columns(rng: np.random.Generator, space: Space, walls: list[Wall], style: d
     """Free-standing columns on a grid in big spaces; engaged columns (pilasters) along exterior walls."""
     rgb = space.colours["column"]
     poly = Polygon(space.footprint)
-    if space.type in ("openspace", "lobby", "conferenceRoom") and space.area > 35 and \
-            rng.random() < (0.9 if space.type == "lobby" else 0.6):
+    if space.type in ("openspace", "lobby") and space.area > 35 and rng.random() < (0.9 if space.type == "lobby" else 0.6):
         inner = poly.buffer(-1.3, join_style="mitre")
         lo, hi = space.footprint.min(0), space.footprint.max(0)
         step = style["grid"]

@@ -83,6 +83,23 @@ def source_info(building: Building) -> dict[str, Any]:
     return dict(building.params, yaw_deg=float(np.degrees(building.frame.yaw)), offset=list(building.frame.offset))
 
 
+def precheck(out: str, format: str, *, overwrite: bool = False, storage_options: dict[str, Any] | None = None) -> None:
+    """Refuse an output that cannot be written (before any work starts): one-line :class:`UserError`."""
+    if format not in FORMATS:
+        raise UserError(None, f"unknown format {format!r}: choose one of {', '.join(FORMATS)}")
+    if format != "store" and not paths.is_local(str(out)):
+        raise UserError(out, f"format {format} writes local files only: use a local path")
+    if format == "laz":
+        if os.path.splitext(str(out))[1].lower() not in (".las", ".laz"):
+            raise UserError(out, "a LAS/LAZ output must end in .las or .laz")
+        targets = [paths.local_path(str(out)), os.path.join(os.path.dirname(paths.local_path(str(out))), "gt.json")]
+    else:
+        targets = [str(out)]
+    for t in targets:
+        if not overwrite and paths.exists(t, storage_options):
+            raise UserError(t, "already exists: choose another name or pass --overwrite")
+
+
 # -- store --------------------------------------------------------------------------------------
 def _store_part(job: ScanJob, builder: StoreBuilder):
     cols = scan_job(job)
