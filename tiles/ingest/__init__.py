@@ -63,13 +63,14 @@ def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None 
     readers: list[Reader] = []
     for src in sources:
         path = paths.normalize(src)
+        ext = os.path.splitext(path.lower())[1]
         if is_dir(path, storage_options):
+            if ext in LAS_EXTENSIONS + TEXT_EXT + E57_EXT:
+                raise UserError(path, f"is a directory, expected a {ext} file")
             from tiles.ingest.s3dis import readers_for
 
             readers.extend(readers_for(path, storage_options))
             continue
-        lower = path.lower()
-        ext = os.path.splitext(lower)[1]
         if ext in LAS_EXTENSIONS:
             from tiles.ingest.las import LasReader
 

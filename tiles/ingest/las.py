@@ -178,6 +178,8 @@ class LasReader(Reader):
         if table_offset >= size:
             raise UserError(self.path, f"truncated: the LAZ chunk table should start at byte {table_offset:,} "
                                        f"but the file has {size:,} bytes")
+        if table_offset not in (-1, 0):
+            self._check_chunk_table_header(f, table_offset, lv)
         f.seek(self.offset_to_points)
         try:
             table = lazrs.read_chunk_table(f, lv)
@@ -207,6 +209,20 @@ class LasReader(Reader):
             raise UserError(self.path, f"truncated: the LAZ chunks end at byte {end:,} but the file has {size:,}")
         self._table = np.array([counts, sizes], dtype=np.int64).T  # driver only (see __getstate__)
         self.chunks = len(counts)
+
+    def _check_chunk_table_header(self, f, table_offset: int, lv) -> None:
+        """Check the chunk table's version and count before lazrs reads it (a garbled count aborts lazrs)."""
+        f.seek(table_offset)
+        head = f.read(8)
+        version = int.from_bytes(head[:4], "little")
+        count = int.from_bytes(head[4:8], "little")
+        if len(head) < 8 or version != 0:
+            raise UserError(self.path, f"corrupt LAZ chunk table (version {version} at byte {table_offset:,})")
+        cs = int(lv.chunk_size())
+        most = self.expected_count if lv.uses_variable_size_chunks() else -(-self.expected_count // cs)
+        if not 0 < count <= most:
+            raise UserError(self.path, f"corrupt LAZ chunk table or wrong header: {count:,} chunks for "
+                                       f"{self.expected_count:,} points")
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)

@@ -100,6 +100,16 @@ def _numbers(tokens: list[bytes]) -> bool:
     return all(_NUMBER.match(t) for t in tokens)
 
 
+def _floats(tokens: list[bytes]) -> bool:
+    """True when every token reads as a float (NaN and infinity included: they are points, and errors)."""
+    try:
+        for t in tokens:
+            float(t)
+    except ValueError:
+        return False
+    return True
+
+
 def repair_line(line: bytes, ncols: int) -> tuple[bytes | None, str]:
     """A line with control characters: the repaired line (or None to skip it) and what was done."""
     cleaned = bytes(b for b in line if not _CONTROL[b])
@@ -312,16 +322,16 @@ def sniff(path: str, storage_options=None, allowed=(3, 6)) -> Sniff:
     pos, header = 0, 0
     for k, line in enumerate(lines):
         toks = _tokens(bytes(c for c in line if not _CONTROL[c]))
-        if toks and len(toks) in allowed and _numbers(toks):
+        if toks and len(toks) in allowed and _floats(toks):
             vals = np.array([float(t) for t in toks])
-            if not np.isfinite(vals[:3]).all():
-                raise UserError(path, f"line {k + 1}: not a finite coordinate in {line[:60]!r}")
+            if not np.isfinite(vals).all():
+                raise UserError(path, f"line {k + 1}: not a finite number (NaN or infinity) in {line[:60]!r}")
             sep = "," if b"," in line else ("\t" if b"\t" in line and b" " not in line else
                                             (" " if re.fullmatch(rb"\S+( \S+)*\r?", line) else r"\s+"))
             n_lines = max(1, len(lines) - k)
             per_line = (len(head) - pos) / n_lines
             return Sniff(pos, len(toks), sep, header, vals[:3], per_line)
-        if toks and _numbers(toks) and len(toks) not in allowed and len(toks) > 1:
+        if toks and _floats(toks) and len(toks) not in allowed and len(toks) > 1:
             raise UserError(path, f"line {k + 1}: {len(toks)} columns; expected "
                                   + " or ".join({3: "x y z", 6: "x y z r g b"}[c] for c in allowed))
         if k >= 20:
