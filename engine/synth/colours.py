@@ -84,6 +84,7 @@ def space_colours(rng: np.random.Generator, space, style: dict) -> None:
 def shade(rng: np.random.Generator, base: np.ndarray, jitter: np.ndarray, brightness: float,
           distance: np.ndarray) -> np.ndarray:
     """8-bit colours of points: base ``(n, 3)`` darkened by brightness and distance, plus jitter."""
-    light = brightness * (1.0 - 0.25 * np.minimum(distance / 10.0, 1.0))
-    rgb = base * light[:, None] + rng.standard_normal(base.shape) * jitter[:, None]
+    light = (brightness * (1.0 - 0.25 * np.minimum(distance / 10.0, 1.0))).astype(np.float32)
+    rgb = base.astype(np.float32) * light[:, None]
+    rgb += rng.standard_normal(base.shape, dtype=np.float32) * jitter.astype(np.float32)[:, None]
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint16)

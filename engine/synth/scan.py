@@ -95,7 +95,8 @@ def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
         elem.append(np.concatenate([np.full(len(t[0]), t[2], np.int64) for t in tris]))
     if not pts:
         return {k: np.empty(0, t) for k, t in COLUMNS.items()}
-    P, N, S = np.concatenate(pts), np.concatenate(nrm), np.concatenate(surf)
+    P, S = np.concatenate(pts), np.concatenate(surf)
+    normals = np.concatenate(nrm)  # one per surface
     base, jit, elem = np.concatenate(base), np.concatenate(jit), np.concatenate(elem)
     boxes = [b for e in sp.elements for b in e.prims if isinstance(b, Box)] + list(sp.occluders)
     # nearest scanners first: the later ones only test what the earlier ones could not see
@@ -103,13 +104,11 @@ def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
     centre = (max(part.lo, axis_xy.min()) + min(part.hi, axis_xy.max())) / 2
     scanners = sp.scanners[np.argsort(np.abs(sp.scanners[:, part.axis] - centre), kind="stable")]
     keep = visible(P, scanners, boxes)
-    P, N, S = P[keep], N[keep], S[keep]
+    P, S = P[keep], S[keep]
     n = len(P)
     sigma = sp.noise
-    P += N * np.clip(rng.normal(0.0, sigma, n), -3 * sigma, 3 * sigma)[:, None]
-    dist = np.full(n, np.inf)
-    for sc in sp.scanners:
-        np.minimum(dist, np.linalg.norm(P - sc, axis=1), out=dist)
+    P += normals[S] * np.clip(rng.standard_normal(n, dtype=np.float32) * sigma, -3 * sigma, 3 * sigma)[:, None]
+    dist = np.sqrt(np.sum((P - scanners[0]) ** 2, axis=1))  # light falls off from the part's nearest scanner
     rgb = shade(rng, base[S], jit[S], sp.brightness, dist)
     world = job.frame.xyz(P)
     el = elem[S]
@@ -206,7 +205,7 @@ def _sample_rects(rng: np.random.Generator, rects: list[Rect], rate: float):
         s, t = st[a:b, 0] * ul[k], st[a:b, 1] * vl[k]
         for s0, s1, t0, t1 in r.holes:
             keep[a:b] &= ~((s > s0) & (s < s1) & (t > t0) & (t < t1))
-    return P[keep], normal[idx[keep]], idx[keep]
+    return P[keep], normal, idx[keep]
 
 
 def _sample_tris(rng: np.random.Generator, tri: np.ndarray, up: np.ndarray, rate: np.ndarray):
@@ -219,7 +218,7 @@ def _sample_tris(rng: np.random.Generator, tri: np.ndarray, up: np.ndarray, rate
     P = (1 - r1) * tri[idx, 0] + r1 * (1 - r2) * tri[idx, 1] + r1 * r2 * tri[idx, 2]
     normal = np.zeros((len(tri), 3))
     normal[:, 2] = np.where(up, 1.0, -1.0)
-    return P, normal[idx], idx
+    return P, normal, idx
 
 
 # -- visibility ---------------------------------------------------------------------------------
@@ -236,7 +235,11 @@ def box_arrays(boxes: list[Box]) -> dict[str, np.ndarray]:
 
 
 def visible(points: np.ndarray, scanners: np.ndarray, boxes: list[Box]) -> np.ndarray:
-    """True for points seen from at least one scanner: the segment to it crosses no box."""
+    """True for points seen from at least one scanner: the segment to it crosses no box.
+
+    Works in float32 (local coordinates, far below the 2 mm tolerance) on points
+    sorted by voxel, so each box's candidate points are a few contiguous runs.
+    """
     n = len(points)
     vis = np.zeros(n, bool)
     if n == 0:
@@ -259,16 +262,18 @@ def _blocked(p: np.ndarray, s: np.ndarray, B: dict[str, np.ndarray]) -> np.ndarr
     """True for points whose segment from scanner ``s`` passes through one of the boxes ``B``."""
     n, m = len(p), len(B["c"])
     # group points in voxels; keep the boxes near the segment from the scanner to each voxel
-    k = np.floor(p / VOXEL).astype(np.int64)
+    k = np.floor(p * (1.0 / VOXEL)).astype(np.int64)
     kmin = k.min(0)
     k -= kmin
     dims = k.max(0) + 1
     key = (k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]
+    del k
     order = np.argsort(key, kind="stable")  # points sorted by voxel
     skey = key[order]
     pstart = np.flatnonzero(np.r_[True, skey[1:] != skey[:-1]])
     pcount = np.diff(np.r_[pstart, n])
     uniq = skey[pstart]
+    del key, skey
     vk = np.c_[uniq // (dims[1] * dims[2]), (uniq // dims[2]) % dims[1], uniq % dims[2]]
     vc = (vk + kmin + 0.5) * VOXEL
     r = VOXEL * math.sqrt(3) / 2
@@ -282,7 +287,10 @@ def _blocked(p: np.ndarray, s: np.ndarray, B: dict[str, np.ndarray]) -> np.ndarr
     blocked = np.zeros(n, bool)
     if not len(cand_v):
         return blocked
-    # candidate voxels sorted by box: then one vectorised test per box over the points of its voxels
+    # relative to the scanner, in float32, sorted by voxel
+    q = (p[order] - s).astype(np.float32)
+    hit = np.zeros(n, bool)
+    # candidate voxels sorted by box: one vectorised test per box over the points of its voxels
     o = np.argsort(cand_b, kind="stable")
     cand_v, cand_b = cand_v[o], cand_b[o]
     bounds = np.flatnonzero(np.r_[True, cand_b[1:] != cand_b[:-1], True])
@@ -291,10 +299,11 @@ def _blocked(p: np.ndarray, s: np.ndarray, B: dict[str, np.ndarray]) -> np.ndarr
         vs = cand_v[a:b]
         lens = pcount[vs]
         total = int(lens.sum())
-        idx = order[np.repeat(pstart[vs] - (np.cumsum(lens) - lens), lens) + np.arange(total)]
-        idx = idx[~blocked[idx]]
+        idx = np.repeat(pstart[vs] - (np.cumsum(lens) - lens), lens) + np.arange(total)
+        idx = idx[~hit[idx]]
         if len(idx):
-            blocked[idx[_segment_box(p[idx], s, B, j)]] = True
+            hit[idx[_segment_box(q[idx], s, B, j)]] = True
+    blocked[order] = hit
     return blocked
 
 
@@ -314,22 +323,25 @@ def _segments_hit_aabbs(s: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.nda
 
 
 def _segment_box(q: np.ndarray, s: np.ndarray, B: dict[str, np.ndarray], j: int) -> np.ndarray:
-    """Slab test of the segments ``s -> q[i]`` against oriented box ``j``: True where the box hides ``q[i]``."""
-    cs, sn = B["cos"][j], B["sin"][j]
-    c, h = B["c"][j], B["h"][j]
-    d0 = s - c
-    sl = (cs * d0[0] + sn * d0[1], -sn * d0[0] + cs * d0[1], d0[2])
-    dx, dy = q[:, 0] - s[0], q[:, 1] - s[1]
-    dirs = (cs * dx + sn * dy, -sn * dx + cs * dy, q[:, 2] - s[2])
-    seglen = np.sqrt(dx * dx + dy * dy + dirs[2] * dirs[2])
-    tnear = np.full(len(q), -np.inf)
-    tfar = np.full(len(q), np.inf)
+    """Slab test of the segments from scanner ``s`` to ``s + q[i]`` against oriented box ``j``.
+
+    True where the box hides the end point: the segment enters the box more than
+    ``EPS`` before its end (points on the box's own visible faces stay visible).
+    """
+    cs, sn = np.float32(B["cos"][j]), np.float32(B["sin"][j])
+    d0 = s - B["c"][j]
+    sl = np.array([B["cos"][j] * d0[0] + B["sin"][j] * d0[1], -B["sin"][j] * d0[0] + B["cos"][j] * d0[1], d0[2]])
+    h = B["h"][j]
+    dx, dy, dz = q[:, 0], q[:, 1], q[:, 2]
+    dirs = (cs * dx + sn * dy, -sn * dx + cs * dy, dz)
+    tnear = np.full(len(q), -np.inf, np.float32)
+    tfar = np.full(len(q), np.inf, np.float32)
     with np.errstate(divide="ignore", invalid="ignore"):
         for a in range(3):
-            inv = 1.0 / dirs[a]
-            t1 = (-h[a] - sl[a]) * inv
-            t2 = (h[a] - sl[a]) * inv
+            inv = np.float32(1.0) / dirs[a]
+            t1 = np.float32(-h[a] - sl[a]) * inv
+            t2 = np.float32(h[a] - sl[a]) * inv
             np.maximum(tnear, np.fmin(t1, t2), out=tnear)
             np.minimum(tfar, np.fmax(t1, t2), out=tfar)
-    eps = EPS / np.maximum(seglen, 1e-6)
+    eps = np.float32(EPS) / np.maximum(np.sqrt(dx * dx + dy * dy + dz * dz), np.float32(1e-6))
     return (tnear <= tfar) & (tnear < 1.0 - eps) & (tfar > eps)
