@@ -14,9 +14,10 @@ passes over the tiles:
    and the peak of the (circularly smoothed) sum is the coarse yaw.  The
    per-tile histograms are kept (``meta/alignment``) so that a later step can
    give a wing at an angle its own frame.
-2. **Refinement** (one task per tile): the "wall pixels" of a finer density
-   image (at least ``wall_factor`` times the tile's median occupied pixel) are
-   projected on both axes for yaws within ``refine_range`` of the coarse one;
+2. **Refinement** (one small task per tile, on a sample of the tile's "wall
+   pixels" kept by the evidence pass, so the tiles are read once): the wall
+   pixels of a finer density image (at least ``wall_factor`` times the tile's
+   median occupied pixel) are projected on both axes for yaws within ``refine_range`` of the coarse one;
    the sharpness (sum of squared bin counts) of those projections is summed
    over tiles and its maximum, interpolated by a parabola, is the yaw.  Sharp
    projections mean walls fall in few bins: the frame is aligned.
@@ -57,8 +58,10 @@ class AlignmentParams:
     refine_step: float = 0.05
     #: Pixel of the refinement image and bin of its projections.
     refine_pixel: float = 0.01
-    #: Refinement uses pixels at least this many times denser than the tile's median occupied pixel.
+    #: Refinement uses pixels at least this many times denser than the tile's median occupied pixel ...
     wall_factor: float = 3.0
+    #: ... at most this many per tile (an even sample of them).
+    max_wall_pixels: int = 20000
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -125,28 +128,53 @@ class Frame:
 def density_image(xy: np.ndarray, pixel: float, lo: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Point counts on a square grid (rows: y, columns: x) and the grid's lower-left corner."""
     xy = np.asarray(xy, dtype=np.float64)
+    if len(xy) == 0:
+        return np.zeros((1, 1), dtype=np.int64), np.zeros(2) if lo is None else np.asarray(lo, float)
     if lo is None:
-        lo = xy.min(axis=0) if len(xy) else np.zeros(2)
-    ij = np.floor((xy - lo) / pixel).astype(np.int64)
-    shape = (int(ij[:, 1].max()) + 1, int(ij[:, 0].max()) + 1) if len(xy) else (1, 1)
-    img = np.bincount(ij[:, 1] * shape[1] + ij[:, 0], minlength=shape[0] * shape[1]).reshape(shape)
+        lo = xy.min(axis=0)
+    ix = ((xy[:, 0] - lo[0]) * (1.0 / pixel)).astype(np.int64)  # non-negative: truncation is floor
+    iy = ((xy[:, 1] - lo[1]) * (1.0 / pixel)).astype(np.int64)
+    shape = (int(iy.max()) + 1, int(ix.max()) + 1)
+    iy *= shape[1]
+    iy += ix
+    img = np.bincount(iy, minlength=shape[0] * shape[1]).reshape(shape)
     return img, np.asarray(lo, dtype=np.float64)
 
 
-def orientation_histogram(xy: np.ndarray, params: AlignmentParams | None = None) -> np.ndarray:
-    """Gradient-orientation histogram modulo 90 degrees of the density image of some points.
+def block_sum(img: np.ndarray, k: int) -> np.ndarray:
+    """Sum of ``k x k`` blocks of an image (padded with zeros): the same counts on a k-times coarser grid."""
+    if k <= 1:
+        return img
+    h, w = img.shape
+    pad = np.zeros((-(-h // k) * k, -(-w // k) * k), dtype=img.dtype)
+    pad[:h, :w] = img
+    return pad.reshape(pad.shape[0] // k, k, pad.shape[1] // k, k).sum(axis=(1, 3))
 
-    Bins of ``angle_bin`` degrees over [0, 90), weighted by gradient magnitude;
-    pixels within three sigmas of the image border are left out (the border of a
-    tile is not an edge of the building).
-    """
+
+def orientation_histogram(xy: np.ndarray, params: AlignmentParams | None = None) -> np.ndarray:
+    """Gradient-orientation histogram modulo 90 degrees of the density image of some points (see below)."""
     p = params or AlignmentParams()
-    nbins = int(round(90.0 / p.angle_bin))
     if len(xy) < 16:
-        return np.zeros(nbins)
-    img, _ = density_image(xy, p.pixel)
+        return np.zeros(int(round(90.0 / p.angle_bin)))
+    return image_orientation_histogram(density_image(xy, p.pixel)[0], p)
+
+
+def image_orientation_histogram(img: np.ndarray, params: AlignmentParams) -> np.ndarray:
+    """Orientation histogram modulo 90 degrees of a density image with ``params.pixel`` pixels.
+
+    Densities above ``wall_factor`` times the median occupied pixel (the floor
+    and ceiling level) count, as ``log(1 + excess)``; the structure tensor of its
+    Gaussian gradient, integrated over ``integration`` metres, gives per pixel the
+    dominant orientation and its coherent strength (λ1 - λ2), which is the
+    weight.  Bins of ``angle_bin`` degrees over [0, 90); pixels within three
+    sigmas of the image border are left out (a tile's border is no edge).
+    """
+    p = params
+    nbins = int(round(90.0 / p.angle_bin))
     occ = img > 0
-    floor_level = p.wall_factor * float(np.median(img[occ])) if occ.any() else 0.0
+    if not occ.any():
+        return np.zeros(nbins)
+    floor_level = p.wall_factor * float(np.median(img[occ]))
     f = np.log1p(np.maximum(img - floor_level, 0.0))
     gy = ndimage.gaussian_filter(f, p.sigma, order=(1, 0), mode="nearest")
     gx = ndimage.gaussian_filter(f, p.sigma, order=(0, 1), mode="nearest")
@@ -159,12 +187,10 @@ def orientation_histogram(xy: np.ndarray, params: AlignmentParams | None = None)
     if f.shape[0] > 2 * border and f.shape[1] > 2 * border:
         inner[border:-border, border:-border] = True
     jxx, jyy, jxy = jxx[inner], jyy[inner], jxy[inner]
-    # dominant gradient orientation of the window and its coherent strength (lambda1 - lambda2)
     weight = np.hypot(jxx - jyy, 2 * jxy)
     ang = np.mod(np.degrees(0.5 * np.arctan2(2 * jxy, jxx - jyy)), 90.0)
     idx = np.minimum((ang / p.angle_bin).astype(np.int64), nbins - 1)
-    mag = weight
-    return np.bincount(idx, weights=mag, minlength=nbins)
+    return np.bincount(idx, weights=weight, minlength=nbins)
 
 
 def coarse_yaw(hist: np.ndarray, angle_bin: float) -> float:
@@ -194,7 +220,14 @@ def wall_pixels(xy: np.ndarray, params: AlignmentParams) -> tuple[np.ndarray, np
     if len(xy) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     img, lo = density_image(xy, params.refine_pixel)
+    return image_wall_pixels(img, lo, params)
+
+
+def image_wall_pixels(img: np.ndarray, lo: np.ndarray, params: AlignmentParams) -> tuple[np.ndarray, np.ndarray]:
+    """Wall pixels of a fine image (``refine_pixel``): at least ``wall_factor`` times its median occupied pixel."""
     occ = img > 0
+    if not occ.any():
+        return np.zeros((0, 2)), np.zeros(0)
     med = float(np.median(img[occ]))
     rows, cols = np.nonzero(img >= max(params.wall_factor * med, 1.0))
     centres = lo + (np.stack([cols, rows], axis=1) + 0.5) * params.refine_pixel
@@ -232,18 +265,47 @@ def parabolic_peak(x: np.ndarray, y: np.ndarray) -> float:
     return float(x[k])
 
 
-def tile_refinement(xy: np.ndarray, coarse_deg: float, params: AlignmentParams) -> dict[str, Any]:
-    """One tile's sharpness curve around the coarse yaw and its extent along the coarse axes."""
-    centres, weights = wall_pixels(xy, params)
+def tile_evidence(xy: np.ndarray, params: AlignmentParams) -> dict[str, np.ndarray]:
+    """Everything the frame estimate needs from one tile, from one read of its points.
+
+    ``histogram``: the orientation histogram (pass 1); ``pixels``/``weights``: a
+    deterministic sample (every k-th) of at most ``max_wall_pixels`` wall pixels of
+    the fine image, for the refinement, which then needs no second read of the
+    tile; ``cells``: centres of the occupied 1-metre cells (the tile's outline, for
+    the extents along the axes).
+    """
+    p = params
+    nbins = int(round(90.0 / p.angle_bin))
+    if len(xy) < 16:
+        return {"histogram": np.zeros(nbins), "pixels": np.zeros((0, 2)), "weights": np.zeros(0),
+                "cells": np.zeros((0, 2))}
+    # one pass over the points: the fine image; the coarser ones are its block sums
+    fine, lo = density_image(xy, p.refine_pixel)
+    k = max(1, int(round(p.pixel / p.refine_pixel)))
+    coarse_params = dataclasses.replace(p, pixel=k * p.refine_pixel)
+    out = {"histogram": image_orientation_histogram(block_sum(fine, k), coarse_params)}
+    centres, weights = image_wall_pixels(fine, lo, p)
+    step = max(1, -(-len(weights) // p.max_wall_pixels))
+    out["pixels"], out["weights"] = centres[::step], weights[::step] * step
+    m = max(1, int(round(1.0 / p.refine_pixel)))
+    rows, cols = np.nonzero(block_sum(fine, m))
+    out["cells"] = lo + (np.stack([cols, rows], axis=1) + 0.5) * (m * p.refine_pixel)
+    return out
+
+
+def refine_sample(evidence: dict[str, np.ndarray], coarse_deg: float, params: AlignmentParams) -> dict[str, Any]:
+    """One tile's sharpness curve around the coarse yaw, and its extent along the coarse axes."""
     angles = refine_angles(coarse_deg, params)
     a = math.radians(coarse_deg)
     c, s = math.cos(a), math.sin(a)
+    pts = evidence["cells"]
     ext = None
-    if len(xy):
-        u = c * xy[:, 0] + s * xy[:, 1]
-        v = -s * xy[:, 0] + c * xy[:, 1]
+    if len(pts):
+        u = c * pts[:, 0] + s * pts[:, 1]
+        v = -s * pts[:, 0] + c * pts[:, 1]
         ext = [float(u.min()), float(u.max()), float(v.min()), float(v.max())]
-    return {"sharpness": projection_sharpness(centres, weights, angles, params.refine_pixel), "extent": ext}
+    return {"sharpness": projection_sharpness(evidence["pixels"], evidence["weights"], angles, params.refine_pixel),
+            "extent": ext}
 
 
 # -- the estimate over a tile store ------------------------------------------------------------
@@ -269,12 +331,8 @@ class Alignment:
                 "refine_sharpness": self.refine_sharpness, "params": self.params.to_dict()}
 
 
-def _tile_evidence(tile: str, store, params: AlignmentParams) -> np.ndarray:
-    return orientation_histogram(store.xyz(tile)[:, :2], params)
-
-
-def _tile_refine(tile: str, store, coarse_deg: float, params: AlignmentParams) -> dict[str, Any]:
-    return tile_refinement(store.xyz(tile)[:, :2], coarse_deg, params)
+def _tile_evidence(tile: str, store, params: AlignmentParams) -> dict[str, np.ndarray]:
+    return tile_evidence(store.xyz(tile)[:, :2], params)
 
 
 def summarize_tile(hist: np.ndarray, angle_bin: float) -> dict[str, Any]:
@@ -303,27 +361,29 @@ def choose_frame(refined_deg: float, extents: list[list[float] | None],
 
 
 def estimate_alignment(store, *, client=None, params: AlignmentParams | None = None,
-                       evidence: list[np.ndarray] | None = None) -> Alignment:
-    """Estimate the building's aligned frame over a tile store (two passes of one task per tile).
+                       evidence: list[dict[str, np.ndarray]] | None = None) -> Alignment:
+    """Estimate the building's aligned frame over a tile store: one pass over the tiles, then small tasks.
 
-    ``evidence`` may pass the per-tile orientation histograms when another pass
-    already computed them (in tile order), saving the first pass.
+    ``evidence`` may pass the per-tile :func:`tile_evidence` (in tile order)
+    when another pass already computed it, so that the tiles are read once.
     """
     p = params or AlignmentParams()
     tiles = [t.name for t in store.tiles]
     if evidence is None:
         evidence = run_tasks(_tile_evidence, tiles, client=client, label="alignment evidence", keys=tiles,
                              extra_args=(store, p))
-    total = np.sum(np.stack(evidence), axis=0) if evidence else np.zeros(int(round(90 / p.angle_bin)))
+    hists = [e["histogram"] for e in evidence]
+    total = np.sum(np.stack(hists), axis=0) if hists else np.zeros(int(round(90 / p.angle_bin)))
     coarse = coarse_yaw(total, p.angle_bin)
-    refs = run_tasks(_tile_refine, tiles, client=client, label="alignment refinement", keys=tiles,
-                     extra_args=(store, coarse, p))
+    items = client.scatter(list(evidence)) if client is not None else evidence
+    refs = run_tasks(refine_sample, items, client=client, label="alignment refinement", keys=tiles,
+                     extra_args=(coarse, p))
     angles = refine_angles(coarse, p)
     sharp = np.sum([r["sharpness"] for r in refs], axis=0) if refs else np.zeros(len(angles))
     refined = parabolic_peak(angles, sharp) if np.any(sharp > 0) else coarse
     origin = tuple(float(v) for v in store.meta.origin)
     frame, swapped = choose_frame(refined, [r["extent"] for r in refs], origin)
-    per_tile = {t: summarize_tile(h, p.angle_bin) for t, h in zip(tiles, evidence)}
+    per_tile = {t: summarize_tile(h, p.angle_bin) for t, h in zip(tiles, hists)}
     return Alignment(frame=frame, coarse_deg=float(coarse), refined_deg=float(refined % 90.0), swapped=swapped,
                      histogram=[round(float(v), 3) for v in total], tiles=per_tile,
                      refine_angles=[float(a) for a in angles], refine_sharpness=[float(v) for v in sharp],

@@ -17,21 +17,24 @@ peak-gap-peak detector::
     r_{δ,c}(s) = min(L, R) − G
 
 Responses are computed for every position and every ``(δ, c)`` with cumulative
-sums, max-pooled over ``(δ, c)`` and suppressed to local maxima at least
-``min_spacing`` apart.  A maximum is a divider when three scale-free tests hold
-(so the same dividers come out at any point density):
+sums; those that pass three scale-free tests (so the same dividers come out at
+any point density) are max-pooled over ``(δ, c)`` and suppressed to the
+maxima at least ``min_spacing`` apart.  The tests:
 
-* contrast: ``G ≤ (1 − min_contrast) · min(L, R)`` (the gap is empty next to its margins);
+* contrast: ``G ≤ (1 − min_contrast) · min(L, R)`` (the gap is empty next to its
+  margins) and ``min(L, R) − G ≥ min_prominence · min(I_L, I_R)`` (the margins are
+  scanned faces standing above the room level, not the edges of an unscanned hole);
 * void: ``G ≤ max_void_ratio_full · min(I_L, I_R)`` where ``I_L``, ``I_R`` are the
   median densities of ``room_window`` metres beyond each margin.  Inside a room
   the floor and ceiling make the histogram never drop far below the room's
   level, so a gap much emptier than the rooms on both sides is a cut through
   floor and ceiling: a wall, not an aisle between two bookcases nor a beam
-  (whose bottom face and the floor below fill its gap).  Door jambs and
-  thresholds fill a wall's gap in part, so when the histogram of the *upper
-  band* (points above door height) is given, the strict test
-  ``G_up ≤ max_void_ratio · min(I_L_up, I_R_up)`` is made there, where a wall
-  is solid over its doors and a room's ceiling is continuous;
+  (whose bottom face and the floor below fill its gap).  Door leaves, jambs
+  and thresholds fill a wall's gap below door height, so when the histogram
+  of the *upper band* (points above door height) is given, the test
+  ``G_up ≤ max_void_ratio · min(I_L_up, I_R_up)`` is made there instead, where
+  a wall is solid over its doors while a room's ceiling (and a beam's bottom
+  face) is continuous;
 * evidence: the gap would hold at least ``min_gap_points`` points at the weaker
   margin's density (too few points say nothing; this is a count, not a density).
 
@@ -69,10 +72,15 @@ class DividerParams:
     pass_widths: tuple[float, ...] = (0.04, 0.08, 0.16, 0.32)
     #: The gap may hold at most ``1 - min_contrast`` of the weaker margin's density.
     min_contrast: float = 0.6
+    #: The stronger margin stands at least this many room levels above the gap: the void is bounded
+    #: by a scanned face (a peak), not just the edges of an unscanned hole at the room's own level.
+    #: (The other side may be unscanned: a wall seen from one room only.)
+    min_prominence: float = 2.0
     #: In the upper band (above doors) the gap may hold at most this fraction of the room level
     #: on each side ...
     max_void_ratio: float = 0.35
-    #: ... and over all heights at most this fraction (door jambs and thresholds fill a gap in part).
+    #: Without an upper band, over all heights at most this fraction (door jambs and thresholds
+    #: fill a gap in part).
     max_void_ratio_full: float = 0.75
     #: Width of the window beyond each margin whose median density is the room level there.
     room_window: float = 1.0
@@ -117,7 +125,7 @@ def vertical_params(**overrides: Any) -> DividerParams:
     above it the void reaches 1.5 m and more, hence stop widths of 0.10-2.0 m.
     """
     base = dict(stop_min=0.10, stop_max=2.0, stop_steps=14, pass_widths=(0.04, 0.08, 0.16, 0.32),
-                min_spacing=1.5, empty_run=2.5)
+                min_spacing=1.5, empty_run=2.5, max_void_ratio_full=0.35)
     base.update(overrides)
     return DividerParams(**base)
 
@@ -187,6 +195,16 @@ def max_pool(br: BankResponse) -> tuple[np.ndarray, np.ndarray]:
     return br.response[best, np.arange(br.response.shape[1])], best
 
 
+def _margins(cs: np.ndarray, med: np.ndarray, i: np.ndarray, d: int, c: int, ql: np.ndarray, qr: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Mean density of the left margin, right margin and gap of filter ``(d, c)`` at gap starts ``i``,
+    and the room level beside (the lower of the medians centred at ``ql`` and ``qr``)."""
+    lm = (cs[i] - cs[i - c]) / c
+    rm = (cs[i + d + c] - cs[i + d]) / c
+    gm = (cs[i + d] - cs[i]) / d
+    return lm, rm, gm, np.minimum(med[ql], med[qr])
+
+
 def non_maximum_suppression(score: np.ndarray, radius: int, valid: np.ndarray | None = None) -> np.ndarray:
     """Indices of positions that are the best valid score within ``radius`` positions (greedy, stable).
 
@@ -227,11 +245,6 @@ def occupied_extent(hist: np.ndarray) -> tuple[int, int] | None:
     return int(nz[0]), int(nz[-1]) + 1
 
 
-def _room_level(h: np.ndarray, lo: int, hi: int) -> float:
-    lo, hi = max(lo, 0), min(hi, len(h))
-    return float(np.median(h[lo:hi])) if hi > lo else np.nan
-
-
 def detect_dividers(hist: np.ndarray, params: DividerParams | None = None, *, start: float = 0.0,
                     upper: np.ndarray | None = None) -> list[Divider]:
     """The peak-gap-peak dividers of a density histogram, in increasing position.
@@ -247,70 +260,65 @@ def detect_dividers(hist: np.ndarray, params: DividerParams | None = None, *, st
     upper
         Optional counts of the same bins for the points of the *upper band* only
         (above door height, see :mod:`engine.slicing`).  When given and the band
-        holds enough points beside a candidate, the void test is made in the band
-        (``max_void_ratio``), where a wall is solid over its doors and a room's
-        ceiling is continuous, and the all-heights gap must only stay below
-        ``max_void_ratio_full`` of the room level; otherwise the all-heights gap
-        must stay below ``max_void_ratio_full``.
+        holds enough points on both sides of a candidate, the void test is made in
+        the band (``max_void_ratio``), where a wall is solid over its doors (door
+        leaves, jambs and thresholds fill a wall's gap below) and a room's ceiling
+        is continuous; otherwise over all heights (``max_void_ratio_full``).
     """
     p = params or DividerParams()
     h = np.asarray(hist, dtype=np.float64)
     n = len(h)
     if n < 3:
         return []
-    bank = p.bank()
-    br = bank_responses(h, bank)
-    pooled, best = max_pool(br)
-    cols = np.arange(len(pooled))
-    lm, rm, gm = br.left[best, cols], br.right[best, cols], br.gap[best, cols]
-    weaker = np.minimum(lm, rm)
-    d, c = bank[best, 0], bank[best, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        contrast = np.where(weaker > 0, 1.0 - gm / weaker, -np.inf)
-    ok = np.isfinite(pooled) & (pooled > 0) & (contrast >= p.min_contrast) & (weaker * d >= p.min_gap_points)
-    # candidates: local maxima (over a few bins) of the pooled response that pass the contrast and
-    # evidence tests; then the void test at each; then suppression at the physical spacing
-    cand = non_maximum_suppression(pooled, 2, ok)
     up = None if upper is None else np.asarray(upper, dtype=np.float64)
-    ucs = None if up is None else np.concatenate(([0.0], np.cumsum(up)))
+    bank = p.bank()
     wb = p.bins(p.room_window)
-    keep = np.zeros(len(pooled), dtype=bool)
-    level = np.full(len(pooled), np.nan)
-    ratio = np.full(len(pooled), np.nan)
-    for j in cand:
-        dj, cj = int(d[j]), int(c[j])
-        i = (int(j) - dj) // 2  # gap start bin
-        lv = _side_levels(h, i, dj, cj, wb)
-        if lv is None or lv <= 0:
+    half = wb // 2
+    cs = np.concatenate(([0.0], np.cumsum(h)))
+    ucs = None if up is None else np.concatenate(([0.0], np.cumsum(up)))
+    # room level: median of a window of room_window metres, centred half a window beyond each margin
+    med = ndimage.median_filter(h, size=wb, mode="reflect")
+    umed = None if up is None else ndimage.median_filter(up, size=wb, mode="reflect")
+    m = 2 * n + 1
+    best = np.full(m, -np.inf)
+    best_k = np.full(m, -1, dtype=np.int64)
+    best_contrast = np.zeros(m)
+    best_ratio = np.zeros(m)
+    for k, (d, c) in enumerate(bank):
+        i = np.arange(c, n - d - c + 1)
+        if len(i) == 0:
             continue
-        full_ratio = gm[j] / lv
-        if full_ratio > p.max_void_ratio_full:
-            continue
-        r = full_ratio
+        ql = np.clip(i - c - half, 0, n - 1)
+        qr = np.clip(i + d + c + half, 0, n - 1)
+        lm, rm, gm, level = _margins(cs, med, i, d, c, ql, qr)
+        limit = np.full(len(i), p.max_void_ratio_full)
         if up is not None:
-            ulv = _side_levels(up, i, dj, cj, wb, both=True)
-            if ulv is not None and ulv * dj >= p.min_gap_points:
-                r = (ucs[i + dj] - ucs[i]) / dj / ulv
-                if r > p.max_void_ratio:
-                    continue
-        keep[j], level[j], ratio[j] = True, lv, r
+            # above the doors where the band holds enough points beside the gap: test the band
+            ulm, urm, ugm, ulevel = _margins(ucs, umed, i, d, c, ql, qr)
+            band = ulevel * d >= p.min_gap_points
+            lm, rm, gm, level = (np.where(band, x, y) for x, y in ((ulm, lm), (urm, rm), (ugm, gm), (ulevel, level)))
+            limit = np.where(band, p.max_void_ratio, limit)
+        weaker = np.minimum(lm, rm)
+        r = 0.5 * (lm + rm) - gm  # the paper's two margins, with the gap subtracted
+        with np.errstate(divide="ignore", invalid="ignore"):
+            contrast = np.where(weaker > 0, 1.0 - gm / weaker, -np.inf)
+            ratio = np.where(level > 0, gm / level, np.inf)
+            score = np.where(level > 0, r / level, -np.inf)
+            prominence = np.where(level > 0, (np.maximum(lm, rm) - gm) / level, -np.inf)
+        valid = ((r > 0) & (contrast >= p.min_contrast) & (weaker * d >= p.min_gap_points) & (level > 0)
+                 & (ratio <= limit) & (prominence >= p.min_prominence))
+        j = 2 * i + d
+        better = valid & (score > best[j])
+        jb = j[better]
+        best[jb] = score[better]
+        best_k[jb] = k
+        best_contrast[jb] = contrast[better]
+        best_ratio[jb] = ratio[better]
     out: list[Divider] = []
-    for j in non_maximum_suppression(pooled, 2 * p.bins(p.min_spacing), keep):
-        out.append(Divider(position=float(start + 0.5 * j * p.bin_width), width=int(d[j]) * p.bin_width,
-                           margin=int(c[j]) * p.bin_width, score=float(pooled[j] / level[j]),
-                           contrast=float(contrast[j]), void_ratio=float(ratio[j]),
+    for j in non_maximum_suppression(best, 2 * p.bins(p.min_spacing), np.isfinite(best)):
+        d, c = bank[best_k[j]]
+        out.append(Divider(position=float(start + 0.5 * j * p.bin_width), width=int(d) * p.bin_width,
+                           margin=int(c) * p.bin_width, score=float(best[j]),
+                           contrast=float(best_contrast[j]), void_ratio=float(best_ratio[j]),
                            cut=int((int(j) + 1) // 2)))
     return out
-
-
-def _side_levels(h: np.ndarray, i: int, d: int, c: int, wb: int, both: bool = False) -> float | None:
-    """The room level beside a gap ``[i, i + d)`` with margins ``c``: the lower of the two sides' medians.
-
-    A side cut off by the end of the histogram is ignored unless ``both`` is
-    required; None when no side can be measured.
-    """
-    levels = [_room_level(h, i - c - wb, i - c), _room_level(h, i + d + c, i + d + c + wb)]
-    known = [v for v in levels if np.isfinite(v)]
-    if not known or (both and len(known) < 2):
-        return None
-    return min(known)

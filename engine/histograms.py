@@ -28,9 +28,9 @@ class Grid:
     """Integer bins of the aligned frame.
 
     ``bu = floor(u / bin_width)``, ``bv = floor(v / bin_width)``, ``bz = floor(z /
-    z_bin)`` with ``(u, v, z)`` aligned coordinates (relative to ``frame.origin``).
-    ``shift`` is ``frame.origin - store origin`` (tile coordinates are local to the
-    store's origin).
+    z_bin)`` with ``(u, v, z)`` aligned coordinates (relative to ``frame.origin``),
+    computed from the stored scaled integers by :meth:`raw_bins`.  ``shift`` is
+    ``frame.origin - store origin`` (for :meth:`aligned` on store-local coordinates).
     """
 
     frame: Frame
@@ -48,16 +48,84 @@ class Grid:
         rel = xyz_local - np.asarray(self.shift) if any(self.shift) else xyz_local
         return self.frame.rotate_to_aligned(rel)
 
-    def bins(self, xyz_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(bu, bv, bz)`` int64 of store-local points."""
-        a = self.aligned(xyz_local)
-        bu = np.floor(a[:, 0] / self.bin_width).astype(np.int64)
-        bv = np.floor(a[:, 1] / self.bin_width).astype(np.int64)
-        bz = np.floor(a[:, 2] / self.z_bin).astype(np.int64)
-        return bu, bv, bz
+    def raw_affine(self, meta) -> np.ndarray:
+        """``(3, 3)`` rows ``[a_x, a_y, a_0]``: bin coordinate = a_x * raw_x + a_y * raw_y + a_0 (u, v), z alike.
+
+        The stored coordinates are scaled integers (``world = raw * scale + offset``),
+        so the bins are one affine map of them; every pass uses this one map
+        (:meth:`raw_bins`), so a point always falls in the same bin.
+        """
+        c, s = self.frame.cos_sin
+        sx, sy, sz = meta.scale
+        bx, by, bz = (np.asarray(meta.offset) - np.asarray(self.frame.origin)).tolist()
+        w, zb = self.bin_width, self.z_bin
+        return np.array([[c * sx / w, s * sy / w, (c * bx + s * by) / w],
+                         [-s * sx / w, c * sy / w, (-s * bx + c * by) / w],
+                         [0.0, sz / zb, bz / zb]])
+
+    def raw_bins(self, raw: dict[str, np.ndarray], affine: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(bu, bv, bz)`` int64 of raw scaled-integer coordinates (see :meth:`raw_affine`)."""
+        x = raw["x"].astype(np.float64)
+        y = raw["y"].astype(np.float64)
+        out = []
+        for k in range(2):
+            t = x * affine[k, 0]
+            t += y * affine[k, 1]
+            t += affine[k, 2]
+            np.floor(t, out=t)
+            out.append(t.astype(np.int64))
+        t = raw["z"].astype(np.float64)
+        t *= affine[2, 1]
+        t += affine[2, 2]
+        np.floor(t, out=t)
+        return out[0], out[1], t.astype(np.int64)
 
     def tile_bins(self, store, tile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.bins(store.xyz(tile))
+        """``(bu, bv, bz)`` of every point of a tile."""
+        return self.raw_bins(store.read(tile, ("x", "y", "z")), self.raw_affine(store.meta))
+
+    def tile_z_bins(self, raw_z: np.ndarray, meta) -> np.ndarray:
+        """``bz`` alone (it does not depend on the yaw), the same map as :meth:`tile_bins`."""
+        a = self.raw_affine(meta)
+        t = raw_z.astype(np.float64)
+        t *= a[2, 1]
+        t += a[2, 2]
+        np.floor(t, out=t)
+        return t.astype(np.int64)
+
+
+def tile_extents(store, grid: Grid) -> np.ndarray:
+    """Per tile ``[u0, u1, v0, v1, z0, z1]`` in bins, a conservative bound from its world bounds."""
+    o = np.asarray(store.meta.origin)
+    out = []
+    for t in store.tiles:
+        x0, y0, z0, x1, y1, z1 = t.bounds
+        corners = np.array([[x0, y0, z0], [x0, y1, z0], [x1, y0, z1], [x1, y1, z1]]) - o
+        a = grid.aligned(corners)
+        out.append([np.floor(a[:, 0].min() / grid.bin_width) - 1, np.floor(a[:, 0].max() / grid.bin_width) + 2,
+                    np.floor(a[:, 1].min() / grid.bin_width) - 1, np.floor(a[:, 1].max() / grid.bin_width) + 2,
+                    np.floor(a[:, 2].min() / grid.z_bin) - 1, np.floor(a[:, 2].max() / grid.z_bin) + 2])
+    return np.array(out, dtype=np.int64).reshape(-1, 6)
+
+
+def tiles_touching(extents: np.ndarray, floors: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Which tiles (rows of :func:`tile_extents`) overlap at least one of the boxes ``[floor, u0, u1, v0, v1]``."""
+    if len(boxes) == 0:
+        return np.zeros(len(extents), dtype=bool)
+    b = np.asarray(boxes, dtype=np.int64)
+    fz = np.asarray(floors, dtype=np.int64)[b[:, 0]]
+    e = extents[:, None, :]
+    hit = ((e[..., 0] < b[:, 2]) & (e[..., 1] > b[:, 1]) & (e[..., 2] < b[:, 4]) & (e[..., 3] > b[:, 3])
+           & (e[..., 4] < fz[:, 1]) & (e[..., 5] > fz[:, 0]))
+    return hit.any(axis=1)
+
+
+def share(client, obj):
+    """``obj`` for the tasks of a batch: sent once to every worker (a future), or itself without a client."""
+    if client is None:
+        return obj
+    return client.scatter(obj, broadcast=True, hash=False)
 
 
 @dataclass
@@ -66,9 +134,11 @@ class BoxIndex:
 
     ``floors``: ``(F, 2)`` z-bin ranges ``[z0, z1)``; ``boxes``: ``(B, 5)`` rows
     ``[floor, u0, u1, v0, v1]`` (half-open bin ranges).  Per storey the sorted
-    distinct box boundaries split the plane into blocks (the arrangement), and a
-    table maps each block to its box, so locating a point is two
-    ``searchsorted`` on short arrays and a table look-up.
+    distinct box boundaries ``ub``, ``vb`` split the plane into blocks (the
+    arrangement) and ``table[f]`` maps each block to its box.  Locating a point
+    is four gathers in flat look-up tables (z bin -> storey, (storey, u bin) ->
+    block row offset, (storey, v bin) -> block column, block -> box), the same
+    for all storeys at once: no search, no mask, no loop over storeys.
     """
 
     floors: np.ndarray
@@ -76,6 +146,16 @@ class BoxIndex:
     ub: list[np.ndarray]
     vb: list[np.ndarray]
     table: list[np.ndarray]
+    # flat look-up tables (built by build): see _flatten
+    z0: int = 0
+    ztab: np.ndarray | None = None
+    umin: int = 0
+    nu: int = 0
+    ubase: np.ndarray | None = None
+    vmin: int = 0
+    nvb: int = 0
+    vcol: np.ndarray | None = None
+    flat: np.ndarray | None = None
 
     @classmethod
     def build(cls, floors: np.ndarray, boxes: np.ndarray) -> "BoxIndex":
@@ -96,43 +176,74 @@ class BoxIndex:
             ubs.append(ub)
             vbs.append(vb)
             tables.append(t)
-        return cls(floors, boxes, ubs, vbs, tables)
+        idx = cls(floors, boxes, ubs, vbs, tables)
+        idx._flatten()
+        return idx
+
+    def _flatten(self) -> None:
+        """Flat tables so that a point's block is ``ubase[f, bu] + vcol[f, bv]`` (negative: none).
+
+        ``ztab`` maps a z bin to its storey (the extra storey ``F`` is "none");
+        ``ubase[f, u]`` is the offset of the row of block column ``u`` of storey
+        ``f`` in ``flat``; ``vcol[f, v]`` is the block row.  Both tables have one
+        padding column at each end and a last row for "no storey", all holding a
+        large negative number, so out-of-range bins need no masks, only a clip.
+        """
+        nf = len(self.floors)
+        neg = -(1 << 40)
+        if nf:
+            self.z0 = int(self.floors[:, 0].min()) - 1
+            self.ztab = np.full(int(self.floors[:, 1].max()) - self.z0 + 1, nf, dtype=np.int64)
+            for f, (a, b) in enumerate(self.floors):
+                self.ztab[a - self.z0:b - self.z0] = f
+        else:
+            self.z0, self.ztab = 0, np.zeros(1, dtype=np.int64)
+        ub_all = [u for u in self.ub if len(u)]
+        vb_all = [v for v in self.vb if len(v)]
+        self.umin = int(min(u[0] for u in ub_all)) - 1 if ub_all else 0
+        self.nu = int(max(u[-1] for u in ub_all)) - self.umin + 1 if ub_all else 1
+        self.vmin = int(min(v[0] for v in vb_all)) - 1 if vb_all else 0
+        self.nvb = int(max(v[-1] for v in vb_all)) - self.vmin + 1 if vb_all else 1
+        ubase = np.full((nf + 1, self.nu + 2), neg, dtype=np.int64)
+        vcol = np.full((nf + 1, self.nvb + 2), neg, dtype=np.int64)
+        toff = np.concatenate(([0], np.cumsum([t.size for t in self.table]))).astype(np.int64)
+        for f in range(nf):
+            ub, vb, t = self.ub[f], self.vb[f], self.table[f]
+            if t.size == 0:
+                continue
+            us = np.arange(ub[0], ub[-1])
+            iu = np.searchsorted(ub, us, side="right") - 1
+            ubase[f, us - self.umin + 1] = toff[f] + iu * t.shape[1]
+            vs = np.arange(vb[0], vb[-1])
+            vcol[f, vs - self.vmin + 1] = np.searchsorted(vb, vs, side="right") - 1
+        self.ubase, self.vcol = ubase.ravel(), vcol.ravel()
+        self.flat = np.concatenate([t.ravel() for t in self.table] + [np.full(1, -1, np.int64)])
 
     def floor_of(self, bz: np.ndarray) -> np.ndarray:
         """Storey of each z bin, -1 outside every storey."""
-        if len(self.floors) == 0:
-            return np.full(len(bz), -1, dtype=np.int64)
-        order = np.argsort(self.floors[:, 0], kind="stable")
-        z0 = self.floors[order, 0]
-        k = np.searchsorted(z0, bz, side="right") - 1
-        f = np.where(k >= 0, order[np.clip(k, 0, None)], -1)
-        inside = (f >= 0) & (bz < self.floors[np.clip(f, 0, None), 1])
-        return np.where(inside, f, -1)
+        f = self.ztab[np.clip(bz - self.z0, 0, len(self.ztab) - 1)]
+        return np.where(f < len(self.floors), f, -1)
 
-    def blocks(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(floor, iu, iv, box)`` of each point; -1 where a point lies in no box."""
-        n = len(bu)
-        floor = self.floor_of(bz)
-        iu = np.full(n, -1, dtype=np.int64)
-        iv = np.full(n, -1, dtype=np.int64)
-        box = np.full(n, -1, dtype=np.int64)
-        for f in range(len(self.floors)):
-            sel = np.flatnonzero(floor == f)
-            ub, vb, t = self.ub[f], self.vb[f], self.table[f]
-            if len(sel) == 0 or t.size == 0:
-                continue
-            a = np.searchsorted(ub, bu[sel], side="right") - 1
-            b = np.searchsorted(vb, bv[sel], side="right") - 1
-            ok = (a >= 0) & (a < t.shape[0]) & (b >= 0) & (b < t.shape[1])
-            s = sel[ok]
-            iu[s], iv[s] = a[ok], b[ok]
-            box[s] = t[a[ok], b[ok]]
-        return floor, iu, iv, box
+    def block_of(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> np.ndarray:
+        """Flat block index of each point in the storeys' arrangements (negative: outside every box's range)."""
+        f = self.ztab[np.clip(bz - self.z0, 0, len(self.ztab) - 1)]
+        ui = np.clip(bu - (self.umin - 1), 0, self.nu + 1)
+        ui += f * (self.nu + 2)
+        vi = np.clip(bv - (self.vmin - 1), 0, self.nvb + 1)
+        vi += f * (self.nvb + 2)
+        blk = self.ubase[ui]
+        blk += self.vcol[vi]
+        return blk
+
+    def blocks(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(block, box)`` of each point: flat block index (negative: none) and box (-1: none)."""
+        blk = self.block_of(bu, bv, bz)
+        box = self.flat[np.where(blk >= 0, blk, len(self.flat) - 1)]
+        return blk, box
 
     def locate(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> np.ndarray:
         """Box of each point, -1 outside every box."""
-        return self.blocks(bu, bv, bz)[3]
+        return self.blocks(bu, bv, bz)[1]
 
 
 @dataclass
@@ -196,9 +307,9 @@ def segment_histograms(tile: str, store, grid: Grid, index: BoxIndex, active: np
     Key ``2 * box + band`` where band 1 marks the storey's upper band (see :func:`upper_band`).
     """
     bu, bv, bz = grid.tile_bins(store, tile)
-    floor, _, _, box = index.blocks(bu, bv, bz)
+    box = index.locate(bu, bv, bz)
     on = (box >= 0) & active[np.clip(box, 0, None)]
-    key = np.where(on, 2 * box + upper_band(floor, bz, band_z), -1)
+    key = np.where(on, 2 * box + upper_band(index.floor_of(bz), bz, band_z), -1)
     return keyed_histogram(key, bu if axis == 0 else bv)
 
 
@@ -206,12 +317,14 @@ def segment_histograms(tile: str, store, grid: Grid, index: BoxIndex, active: np
 class EdgeTables:
     """For every block of the cells' arrangement and each side (-u, +u, -v, +v): the edge there, or -1.
 
-    ``position[e]`` is the bin edge of the shared face of edge ``e`` along its
-    axis ``axis[e]``; a point within ``window`` bins of a face (on either side)
-    is counted in that edge's histogram at ``window + (bin - position)``.
+    ``flat[4 * block + side]`` with ``block`` the flat block index of
+    :meth:`BoxIndex.block_index`.  ``position[e]`` is the bin edge of the shared
+    face of edge ``e`` along its axis; a point within ``window`` bins of a face
+    (on either side) is counted in that edge's histogram at ``window + (bin -
+    position)``.
     """
 
-    tables: list[np.ndarray]  # per storey (nu, nv, 4)
+    flat: np.ndarray
     axis: np.ndarray
     position: np.ndarray
     window: int
@@ -225,25 +338,16 @@ def edge_histograms(tile: str, store, grid: Grid, index: BoxIndex, edges: EdgeTa
     within the window; all of them go to ONE bincount keyed by ``2 * edge + band``.
     """
     bu, bv, bz = grid.tile_bins(store, tile)
-    floor, iu, iv, box = index.blocks(bu, bv, bz)
-    band = upper_band(floor, bz, band_z)
-    keys_e, keys_b = [], []
+    blk, box = index.blocks(bu, bv, bz)
+    band = upper_band(index.floor_of(bz), bz, band_z)
     inside = np.flatnonzero(box >= 0)
+    blk, bu, bv, band = blk[inside], bu[inside], bv[inside], band[inside]
     w = edges.window
-    for f in np.unique(floor[inside]):
-        sel = inside[floor[inside] == f]
-        t = edges.tables[f]
-        for side in range(4):
-            e = t[iu[sel], iv[sel], side]
-            ok = e >= 0
-            if not ok.any():
-                continue
-            pts = sel[ok]
-            e = e[ok]
-            off = (bu if side < 2 else bv)[pts] - edges.position[e]
-            near = (off >= -w) & (off < w)
-            keys_e.append(2 * e[near] + band[pts[near]])
-            keys_b.append(off[near] + w)
-    if not keys_e:
-        return keyed_histogram(np.zeros(0, np.int64), np.zeros(0, np.int64))
+    keys_e, keys_b = [], []
+    for side in range(4):
+        e = edges.flat[4 * blk + side]
+        off = (bu if side < 2 else bv) - edges.position[np.clip(e, 0, None)]
+        near = (e >= 0) & (off >= -w) & (off < w)
+        keys_e.append(2 * e[near] + band[near])
+        keys_b.append(off[near] + w)
     return keyed_histogram(np.concatenate(keys_e), np.concatenate(keys_b))

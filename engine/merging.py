@@ -34,7 +34,7 @@ from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
 from engine.dividers import DividerParams, detect_dividers, empty_runs
-from engine.histograms import BoxIndex, EdgeTables, Grid, accumulate, edge_histograms
+from engine.histograms import BoxIndex, EdgeTables, Grid, accumulate, edge_histograms, share
 from engine.slicing import Box
 from tiles.tasks import run_tasks
 
@@ -95,7 +95,8 @@ def build_edge_tables(index: BoxIndex, cells: list[Box], edges: list[Edge], wind
                 tables[f][a0:a1, o0:o1, side] = e_id
             else:
                 tables[f][o0:o1, a0:a1, side] = e_id
-    return EdgeTables(tables, np.array([e.axis for e in edges], dtype=np.int64),
+    flat = np.concatenate([t.reshape(-1) for t in tables] + [np.full(4, -1, np.int64)])
+    return EdgeTables(flat, np.array([e.axis for e in edges], dtype=np.int64),
                       np.array([e.position for e in edges], dtype=np.int64), window)
 
 
@@ -143,7 +144,7 @@ def test_edges(store, grid: Grid, floors: np.ndarray, cells: list[Box], edges: l
     tables = build_edge_tables(index, cells, edges, window)
     tiles = [t.name for t in store.tiles]
     parts = run_tasks(edge_histograms, tiles, client=client, label="merging: face histograms", keys=tiles,
-                      extra_args=(store, grid, index, tables, band_z))
+                      extra_args=(store, grid, share(client, index), share(client, tables), band_z))
     hists = accumulate(parts, np.zeros(2 * len(edges), dtype=np.int64), np.full(2 * len(edges), 2 * window))
     items = []
     for k, e in enumerate(edges):

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from engine.dividers import DividerParams, detect_dividers, empty_runs
-from engine.histograms import BoxIndex, Grid, accumulate, segment_histograms
+from engine.histograms import BoxIndex, Grid, accumulate, segment_histograms, share, tile_extents, tiles_touching
 from tiles.tasks import run_tasks
 
 AXES = ("u", "v", "z")
@@ -150,15 +150,59 @@ def floor_levels(z_hist: np.ndarray, z_lo: int, floors: list[tuple[int, int]], z
     return out
 
 
-def find_storeys(z_hist: np.ndarray, z_lo: int, params: DividerParams) -> tuple[list[tuple[int, int]], list[FoundDivider]]:
-    """Storeys as z-bin ranges from the building's z histogram, and the slab dividers between them."""
+def find_storeys(z_hist: np.ndarray, z_lo: int, params: DividerParams, min_height: float = 2.0
+                 ) -> tuple[list[tuple[int, int]], list[FoundDivider]]:
+    """Storeys as z-bin ranges from the building's z histogram, and the slab dividers between them.
+
+    A storey is at least ``min_height`` tall: while a slab cut leaves a thinner
+    piece beside it (e.g. above the ordinary ceilings, the higher ceilings of
+    some rooms), the cut bounding the thinnest piece whose gap is the fullest
+    (then the weakest) is dropped.
+    """
     split = split_histogram(z_hist, z_lo, params)
-    floors = [(a, b) for a, b, _ in split.pieces]
+    cuts = sorted(split.dividers, key=lambda d: d["cut"])
+    min_bins = params.bins(min_height)
+    cs = np.concatenate(([0], np.cumsum(z_hist)))
+    # occupied stretches between empty runs; cuts subdivide them
+    runs = [(a, b) for a, b, _ in _stretches(z_hist, z_lo, params)]
+    while True:
+        pieces = []  # (start, stop, index of the cut below or None, index of the cut above or None)
+        for a, b in runs:
+            inside = [k for k, d in enumerate(cuts) if a < d["cut"] < b]
+            edges = [a] + [cuts[k]["cut"] for k in inside] + [b]
+            marks = [None] + inside + [None]
+            for i in range(len(edges) - 1):
+                pieces.append((edges[i], edges[i + 1], marks[i], marks[i + 1]))
+        thin = [p for p in pieces if p[1] - p[0] < min_bins and (p[2] is not None or p[3] is not None)]
+        if not thin:
+            break
+        a, b, below, above = min(thin, key=lambda p: (p[1] - p[0], p[0]))
+        bounding = [k for k in (below, above) if k is not None]
+        # drop the less slab-like cut: the fuller gap (a real slab's void holds nothing), then the weaker
+        drop = max(bounding, key=lambda k: (cuts[k]["void_ratio"], -cuts[k]["score"], k))
+        cuts.pop(drop)
+    floors = []
+    for a, b, _, _ in pieces:
+        if cs[b - z_lo] - cs[a - z_lo] > 0:
+            floors.append((a, b))
     divs = [FoundDivider("z", -1, d["position"], d["width"], d["score"], [], level=0,
-                         contrast=d["contrast"], void_ratio=d["void_ratio"]) for d in split.dividers]
+                         contrast=d["contrast"], void_ratio=d["void_ratio"]) for d in cuts]
     divs += [FoundDivider("z", -1, 0.5 * (a + b) * params.bin_width, (b - a) * params.bin_width, 0.0, [],
                           kind="empty") for a, b in split.empties]
     return floors, divs
+
+
+def _stretches(hist: np.ndarray, lo: int, params: DividerParams) -> list[tuple[int, int, int]]:
+    """Occupied stretches ``(start, stop, points)`` (global bins) between runs of ``empty_run`` empty bins."""
+    runs = empty_runs(hist, params.bins(params.empty_run))
+    out, a, n = [], 0, len(hist)
+    for r0, r1 in runs:
+        if r0 > a:
+            out.append((lo + a, lo + r0, int(np.sum(hist[a:r0]))))
+        a = r1
+    if a < n:
+        out.append((lo + a, lo + n, int(np.sum(hist[a:n]))))
+    return out
 
 
 def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[Box], params: DividerParams,
@@ -170,7 +214,8 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
     boxes = list(start)
     dividers: list[FoundDivider] = []
     stats: list[dict[str, Any]] = []
-    tiles = [t.name for t in store.tiles]
+    names = np.array([t.name for t in store.tiles])
+    extents = tile_extents(store, grid)
     bw = grid.bin_width
     for level in range(1, max_levels + 1):
         axis = (level - 1) % 2
@@ -179,8 +224,11 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
             break
         index = BoxIndex.build(np.array(floors), np.array([b.row() for b in boxes]))
         active = np.array([not b.final for b in boxes], dtype=bool)
-        parts = run_tasks(segment_histograms, tiles, client=client, label=f"slicing level {level} ({AXES[axis]})",
-                          keys=tiles, extra_args=(store, grid, index, active, axis, band_z))
+        # only the tiles that touch a box still searched
+        tiles = names[tiles_touching(extents, np.array(floors), np.array([boxes[i].row() for i in active_ids]))]
+        parts = run_tasks(segment_histograms, list(tiles), client=client,
+                          label=f"slicing level {level} ({AXES[axis]})", keys=list(tiles),
+                          extra_args=(store, grid, share(client, index), active, axis, band_z))
         lo = np.array([b.range(axis)[0] for b in boxes])
         length = np.array([b.range(axis)[1] - b.range(axis)[0] for b in boxes])
         length[~active] = 0
@@ -212,7 +260,7 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
                 for p0, p1, c in sp.pieces:
                     new.append(b.with_range(axis, p0, p1, quiet=1, final=False, count=c, level=level))
         stats.append({"level": level, "axis": AXES[axis], "searched": len(active_ids), "dividers": n_div,
-                      "boxes": len(new)})
+                      "boxes": len(new), "tiles": len(tiles)})
         boxes = new
     for b in boxes:
         b.final = True

@@ -54,9 +54,9 @@ import dask.config
 import numpy as np
 
 from engine import config  # noqa: F401  (registers the defaults)
-from engine.alignment import (AlignmentParams, Frame, estimate_alignment, orientation_histogram)
-from engine.dividers import DividerParams
-from engine.histograms import BoxIndex, Grid, z_histogram
+from engine.alignment import AlignmentParams, Frame, estimate_alignment, tile_evidence
+from engine.dividers import DividerParams, vertical_params
+from engine.histograms import BoxIndex, Grid, share, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
 from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
 from tiles.schema import Dimension
@@ -75,11 +75,16 @@ class SpaceParams:
     bin_width: float = 0.02
     z_bin: float = 0.02
     walls: DividerParams = field(default_factory=DividerParams)
-    slabs: DividerParams = field(default_factory=lambda: DividerParams(
-        stop_min=0.10, stop_max=2.0, stop_steps=14, min_spacing=1.5, empty_run=2.5, max_void_ratio_full=0.35))
+    slabs: DividerParams = field(default_factory=vertical_params)
     alignment: AlignmentParams = field(default_factory=AlignmentParams)
     yaw: float | None = None  # degrees; None: estimate
     max_levels: int = 8
+    #: Slicing accepts walls that span only part of a box: their void, in the upper band, may hold up to
+    #: this fraction of the room level (the rest of the box's cross-section); merging then decides each
+    #: shared face with the strict ``walls.max_void_ratio``.
+    slicing_void_ratio: float = 0.7
+    slicing_void_ratio_full: float = 0.85
+    min_storey_height: float = 2.0
     upper_band: float = 2.2  # m above a storey's floor: doors end below, walls are solid above
     merge_window: float = 2.0
     min_face: float = 0.3
@@ -92,6 +97,12 @@ class SpaceParams:
         object.__setattr__(self, "slabs", dataclasses.replace(self.slabs, bin_width=self.z_bin))
 
     @property
+    def slicing_walls(self) -> DividerParams:
+        """The wall search of slicing: permissive void ratios (see ``slicing_void_ratio``)."""
+        return dataclasses.replace(self.walls, max_void_ratio=self.slicing_void_ratio,
+                                   max_void_ratio_full=self.slicing_void_ratio_full)
+
+    @property
     def rules(self) -> MergeRules:
         return MergeRules(self.min_space_area, self.min_space_width, self.min_relative_density)
 
@@ -101,8 +112,9 @@ class SpaceParams:
         c = dict(dask.config.get("buildingparser.spaces", {}) or {})
         c = {k.replace("-", "_"): v for k, v in c.items()}
         kw: dict[str, Any] = {}
-        for name in ("bin_width", "z_bin", "yaw", "max_levels", "upper_band", "merge_window", "min_face", "min_space_area",
-                     "min_space_width", "min_relative_density"):
+        for name in ("bin_width", "z_bin", "yaw", "max_levels", "slicing_void_ratio", "slicing_void_ratio_full",
+                     "min_storey_height", "upper_band", "merge_window",
+                     "min_face", "min_space_area", "min_space_width", "min_relative_density"):
             if c.get(name) is not None:
                 kw[name] = c[name]
         if c.get("walls"):
@@ -244,31 +256,41 @@ def _jsonable(x: Any) -> Any:
 
 # -- tasks ---------------------------------------------------------------------------------------------
 
-def _first_pass(tile: str, store, params: AlignmentParams, z_lo: int, z_n: int, z_bin: float) -> dict[str, Any]:
+def _first_pass(tile: str, store, params: AlignmentParams, grid: Grid, z_lo: int, z_n: int) -> dict[str, Any]:
     """Orientation evidence and z histogram of one tile (one read of its coordinates)."""
-    xyz = store.xyz(tile)
-    bz = np.floor(xyz[:, 2] / z_bin).astype(np.int64)
-    return {"orientation": orientation_histogram(xyz[:, :2], params), "z": z_histogram(bz, z_lo, z_n)}
+    m = store.meta
+    raw = store.read(tile, ("x", "y", "z"))
+    xy = np.empty((len(raw["x"]), 2))
+    for i, a in enumerate("xy"):
+        np.multiply(raw[a], m.scale[i], out=xy[:, i], casting="unsafe")
+        xy[:, i] += m.offset[i] - m.origin[i]
+    bz = grid.tile_z_bins(raw["z"], m)
+    return {"evidence": tile_evidence(xy, params), "z": z_histogram(bz, z_lo, z_n)}
 
 
 def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.ndarray, n_cells: int,
                 n_spaces: int) -> dict[str, Any]:
     """Write ``cell_id`` and ``space_id`` of one tile; per-space counts and z ranges."""
-    xyz = store.xyz(tile)
-    bu, bv, bz = grid.bins(xyz)
+    m = store.meta
+    raw = store.read(tile, ("x", "y", "z"))
+    bu, bv, bz = grid.raw_bins(raw, grid.raw_affine(m))
     cell = index.locate(bu, bv, bz)
     space = np.where(cell >= 0, cell_space[np.clip(cell, 0, None)], -1)
     store.write_array(tile, "cell_id", cell.astype(np.int32))
     store.write_array(tile, "space_id", space.astype(np.int32))
-    z = xyz[:, 2] + store.meta.origin[2]
-    zmin = np.full(n_spaces, np.inf)
-    zmax = np.full(n_spaces, -np.inf)
     s = space >= 0
-    np.minimum.at(zmin, space[s], z[s])
-    np.maximum.at(zmax, space[s], z[s])
+    # z range per space from the raw integers (monotonic in z)
+    zmin = np.full(n_spaces, np.iinfo(np.int64).max)
+    zmax = np.full(n_spaces, np.iinfo(np.int64).min)
+    zr = raw["z"].astype(np.int64)
+    np.minimum.at(zmin, space[s], zr[s])
+    np.maximum.at(zmax, space[s], zr[s])
+    present = np.bincount(space[s], minlength=n_spaces) > 0
+    to_world = lambda v: np.where(present, v * m.scale[2] + m.offset[2], np.nan)  # noqa: E731
     return {"space_counts": np.bincount(space[s], minlength=n_spaces),
             "cell_counts": np.bincount(cell[cell >= 0], minlength=n_cells),
-            "zmin": zmin, "zmax": zmax, "unassigned": int((~s).sum())}
+            "zmin": np.where(present, to_world(zmin), np.inf), "zmax": np.where(present, to_world(zmax), -np.inf),
+            "unassigned": int((~s).sum())}
 
 
 # -- the stage ---------------------------------------------------------------------------------------------
@@ -308,15 +330,16 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
     origin = tuple(float(v) for v in meta.origin)
     z_lo = int(math.floor((meta.bounds[2] - origin[2]) / p.z_bin)) - 1
     z_n = int(math.floor((meta.bounds[5] - origin[2]) / p.z_bin)) + 2 - z_lo
+    zgrid = Grid.for_store(store, Frame(0.0, origin), p.bin_width, p.z_bin)  # z bins do not depend on the yaw
     first = run_tasks(_first_pass, tiles, client=client, label="spaces: evidence + z histogram", keys=tiles,
-                      extra_args=(store, p.alignment, z_lo, z_n, p.z_bin))
+                      extra_args=(store, p.alignment, zgrid, z_lo, z_n))
     z_hist = np.sum([r["z"] for r in first], axis=0)
     seconds["first_pass"] = time.perf_counter() - t0
 
     t = time.perf_counter()
     if p.yaw is None:
         alignment = estimate_alignment(store, client=client, params=p.alignment,
-                                       evidence=[r["orientation"] for r in first])
+                                       evidence=[r["evidence"] for r in first])
         frame = alignment.frame
         store.set_doc("alignment", _jsonable(alignment.to_doc()))
     else:
@@ -325,13 +348,13 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
     grid = Grid.for_store(store, frame, p.bin_width, p.z_bin)
 
     t = time.perf_counter()
-    floors, slabs = find_storeys(z_hist, z_lo, p.slabs)
+    floors, slabs = find_storeys(z_hist, z_lo, p.slabs, p.min_storey_height)
     for d in slabs:
         d.position += frame.origin[2]
     ground = floor_levels(z_hist, z_lo, floors, p.z_bin)
     band_z = np.array([g + int(round(p.upper_band / p.z_bin)) for g in ground], dtype=np.int64)
     start = _initial_boxes(store, grid, floors)
-    cells, walls, levels = slice_storeys(store, grid, floors, start, p.walls, band_z, client=client,
+    cells, walls, levels = slice_storeys(store, grid, floors, start, p.slicing_walls, band_z, client=client,
                                          max_levels=p.max_levels)
     seconds["slicing"] = time.perf_counter() - t
 
@@ -352,7 +375,8 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
                   {"name": "space_id", "type": "int32", "description": "space id"}),
     ])
     labelled = run_tasks(_label_tile, tiles, client=client, label="spaces: writing labels", keys=tiles,
-                         extra_args=(store, grid, index, comps.labels.astype(np.int64), len(cells), n_spaces))
+                         extra_args=(store, grid, share(client, index), comps.labels.astype(np.int64), len(cells),
+                                     n_spaces))
     seconds["labelling"] = time.perf_counter() - t
 
     parse = _assemble(store, p, frame, floors, slabs + walls, cells, edges, comps.labels, labelled, tiles,

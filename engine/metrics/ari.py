@@ -34,8 +34,19 @@ def contingency_pairs(truth: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, 
     t, p = t[keep], p[keep]
     if len(t) == 0:
         return np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64)
-    pairs, counts = np.unique(np.stack([t, p], axis=1), axis=0, return_counts=True)
-    return pairs, counts.astype(np.int64)
+    # one integer key per pair: a bincount when the key range is small, else a sort
+    t0, p0 = int(t.min()), int(p.min())
+    width = int(p.max()) - p0 + 1
+    key = (t - t0) * width + (p - p0)
+    span = int(key.max()) + 1
+    if span <= 4 * len(key) + 1024:
+        counts = np.bincount(key, minlength=span)
+        uniq = np.flatnonzero(counts)
+        counts = counts[uniq]
+    else:
+        uniq, counts = np.unique(key, return_counts=True)
+    pairs = np.stack([uniq // width + t0, uniq % width + p0], axis=1)
+    return pairs.astype(np.int64), counts.astype(np.int64)
 
 
 def sum_pairs(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
