@@ -6,10 +6,12 @@ them straight into the tiles would have several tasks write the same Zarr
 chunk, which silently loses data.  So building is a two-step external shuffle:
 
 1. :meth:`StoreBuilder.write_part` (one task per part) sorts the part's points
-   by tile, stably, and writes them to ``_staging/p<k>`` in the store being
-   built; it returns a :class:`PartSummary` (where each tile's run starts).
+   by tile, stably, and writes them to one raw file ``_staging/p<k>.bin`` in the
+   store being built, tile run after tile run, each run holding every dimension
+   in turn; it returns a :class:`PartSummary` (where each tile's run starts).
 2. :meth:`StoreBuilder.finalize` runs one task per tile that reads that tile's
-   run from every part, in part order, and writes the tile's arrays whole.
+   run from every part (one byte range per part), in part order, and writes the
+   tile's arrays whole.
    Then it writes the metadata document (``complete: true`` last), deletes the
    staging area and renames the build into place.
 
@@ -28,7 +30,6 @@ from typing import Any
 import dask
 import numpy as np
 import zarr
-import zarr.codecs
 
 from tiles import paths
 from tiles.errors import UserError
@@ -36,9 +37,6 @@ from tiles.schema import (META_KEY, POINT_INDEX, SCHEMA_VERSION, Dimension, Part
                           TileInfo)
 from tiles.store import TILE_CHUNK, TileStore, _open_group, tile_compressor, tile_name, utc_now
 from tiles.tasks import run_tasks
-
-#: Bytes per chunk of a part's staging array (a tile's task decompresses only the chunks it needs).
-STAGING_CHUNK = 1 << 18
 
 
 def default_tile_size() -> float:
@@ -263,7 +261,7 @@ def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int]]], builder
     row = builder.row_bytes
     pieces: list[list[np.ndarray]] = [[] for _ in dtypes]
     for part_id, start, count in runs:
-        raw = zarr.open_array(_staging_url(builder, part_id), **_kw(builder))[start * row:(start + count) * row]
+        raw = _read_staging(builder, part_id, start * row, count * row)
         off = 0
         for j, (d, dt) in enumerate(zip(builder.dimensions, dtypes)):
             a = np.frombuffer(raw, dtype=dt, count=count, offset=off)
@@ -283,38 +281,39 @@ def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int]]], builder
 
 
 def _staging_url(builder: StoreBuilder, part_id: int) -> str:
-    url = paths.join(builder.build_url, "_staging", f"p{part_id:07d}")
+    url = paths.join(builder.build_url, "_staging", f"p{part_id:07d}.bin")
     return paths.local_path(url) if paths.is_local(url) else url
 
 
-def _kw(builder: StoreBuilder) -> dict[str, Any]:
-    kw: dict[str, Any] = {"mode": "r", "zarr_format": 3}
-    if not paths.is_local(builder.build_url):
-        kw["storage_options"] = builder.storage_options
-    return kw
-
-
-def staging_compressors() -> list:
-    """The staging codec (``buildingparser.ingest.staging-codec``): ``none`` or a Blosc compressor name."""
-    name = str(dask.config.get("buildingparser.ingest.staging-codec", "lz4"))
-    if name == "none":
-        return []
-    return [zarr.codecs.BloscCodec(cname=name, clevel=1, shuffle="noshuffle")]
-
-
 def _write_staging(builder: StoreBuilder, part_id: int, blob: np.ndarray) -> None:
-    """Write a part's staging bytes as one sharded array (one shard file, chunks read independently)."""
-    n = len(blob)
-    inner = STAGING_CHUNK
-    shard = max(inner, -(-n // inner) * inner)
-    kw: dict[str, Any] = {}
-    if not paths.is_local(builder.build_url):
-        kw["storage_options"] = builder.storage_options
-    arr = zarr.create_array(_staging_url(builder, part_id), shape=(n,), dtype=np.uint8, chunks=(inner,),
-                            shards=(shard,), compressors=staging_compressors(), zarr_format=3,
-                            overwrite=True, **kw)
-    if n:
-        arr[:] = blob
+    """Write a part's staging bytes as one raw file (private to the build, removed by :meth:`finalize`).
+
+    Raw rather than a compressed Zarr array: the bytes are written once and read
+    once, in ranges, by the tile tasks; codecs and sharding cost more CPU than
+    they save I/O (see benchmarks/bench_ingest.py).
+    """
+    url = _staging_url(builder, part_id)
+    if paths.is_local(url):
+        with open(url, "wb") as f:
+            f.write(memoryview(blob))
+    else:
+        fs, p = paths.filesystem(url, builder.storage_options)
+        fs.pipe_file(p, memoryview(blob).tobytes())
+
+
+def _read_staging(builder: StoreBuilder, part_id: int, offset: int, size: int) -> bytes:
+    """``size`` bytes of a part's staging file from ``offset``."""
+    url = _staging_url(builder, part_id)
+    if paths.is_local(url):
+        with open(url, "rb") as f:
+            f.seek(offset)
+            data = f.read(size)
+    else:
+        fs, p = paths.filesystem(url, builder.storage_options)
+        data = fs.cat_file(p, start=offset, end=offset + size)
+    if len(data) != size:
+        raise RuntimeError(f"staging file of part {part_id} is short: {len(data)} of {size} bytes at {offset}")
+    return data
 
 
 def _write_whole(group: zarr.Group, name: str, values: np.ndarray) -> None:

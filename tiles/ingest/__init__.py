@@ -39,8 +39,7 @@ import dask
 from tiles import paths
 from tiles.builder import StoreBuilder
 from tiles.errors import UserError
-from tiles.ingest._common import (DEFAULT_SCALE, Quantization, Reader, complete_columns, is_dir, offset_near,
-                                  union_dimensions)
+from tiles.ingest._common import Quantization, Reader, complete_columns, is_dir, offset_near, union_dimensions
 from tiles.schema import Part, Source
 from tiles.store import TileStore
 from tiles.tasks import run_tasks
@@ -288,6 +287,3 @@ def _ground_truth_docs(readers, stats, grid) -> dict[str, Any]:
         return {}
     return {DOC: make_doc(spaces, elements)}
 
-
-# re-exported for callers that want the default grid step of sources without one
-DEFAULT_TEXT_SCALE = DEFAULT_SCALE

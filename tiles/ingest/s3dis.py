@@ -47,7 +47,7 @@ from tiles.errors import UserError
 from tiles.groundtruth import GTElement, GTSpace, gt_dimensions
 from tiles.ingest._common import PartResult, Quantization, Reader, is_dir, listdir, open_binary
 from tiles.ingest.text import (BlockStats, Sniff, bad_line_policy, color_dimensions, defect_warnings, line_number,
-                               parse_lines, points_columns, read_lines_block, sniff, summarize_defects)
+                               parse_lines, points_columns, read_lines_block, sniff)
 from tiles.schema import coordinate_dimensions
 
 _ANNOTATION = re.compile(r"^(?P<cls>.+?)_(?P<num>\d+)(?P<dup> \(\d+\))?\.txt$")
@@ -389,4 +389,4 @@ def readers_for(path: str, storage_options=None) -> list[S3DISReader]:
     return [S3DISReader(area, rooms, storage_options) for area, rooms in find_areas(path, storage_options)]
 
 
-__all__ = ["S3DISReader", "find_areas", "readers_for", "space_type", "summarize_defects"]
+__all__ = ["S3DISReader", "find_areas", "readers_for", "space_type"]

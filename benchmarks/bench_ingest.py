@@ -1,0 +1,144 @@
+"""Ingest speed: ``tiles.ingest.ingest`` of a large LAZ (and LAS) file next to laspy decoding the same file.
+
+The benchmark writes a building-like cloud with laspy (20 M points, point
+format 7: x y z, intensity, returns, classification, gps_time, rgb; ``--quick``:
+1 M), as LAZ and as LAS, then times in the same run:
+
+* ``laspy LAZ, 2 threads`` -- ``laspy.read`` with the lazrs parallel backend,
+  which decodes LAZ chunks on both cores: the reference for our 2 workers;
+* ``laspy LAZ, 1 thread`` -- ``laspy.read`` with the single-threaded lazrs
+  backend, for scale;
+* ``ingest LAZ`` -- ``tiles.ingest.ingest`` on a 2-worker LocalCluster (one
+  thread each, started before the clock): decode every part, stage it by tile,
+  write every tile (Zarr, zstd) and the metadata;
+* the same for the uncompressed LAS, whose reference (``laspy.read``) is a
+  plain read of the file into memory.
+
+Reported: seconds, points/s, the ratio ingest / laspy (target <= 1.3 for LAZ
+against the 2-thread decode) and peak memory (whole process tree, and the
+largest single process).  Tracked: the two ratios.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import tempfile
+import time
+from typing import Any
+
+import dask
+import numpy as np
+
+from benchmarks import common
+
+SEED = 11
+
+
+def building_points(n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` points on the floors, ceilings and walls of a 60 x 40 m floor of 6 x 5 m rooms, with noise."""
+    kind = rng.choice(4, size=n, p=[0.25, 0.25, 0.25, 0.25])
+    xyz = rng.uniform([0, 0, 0], [60.0, 40.0, 3.0], (n, 3))
+    xyz[kind == 0, 2] = 0.0
+    xyz[kind == 1, 2] = 3.0
+    wx, wy = kind == 2, kind == 3
+    xyz[wx, 0] = np.round(xyz[wx, 0] / 6.0) * 6.0
+    xyz[wy, 1] = np.round(xyz[wy, 1] / 5.0) * 5.0
+    xyz += rng.normal(0, 0.004, xyz.shape)
+    return xyz
+
+
+def write_cloud(path: str, n: int, *, compress: bool, chunk: int = 2_000_000) -> None:
+    """Write the benchmark cloud with laspy, ``chunk`` points at a time (bounded memory)."""
+    import laspy
+
+    header = laspy.LasHeader(point_format=7, version="1.4")
+    header.scales = np.array([0.0005, 0.0005, 0.0005])
+    header.offsets = np.array([500_000.0, 4_000_000.0, 0.0])
+    rng = np.random.default_rng(SEED)
+    backend = laspy.LazBackend.LazrsParallel if compress else None
+    with laspy.open(path, mode="w", header=header, do_compress=compress, laz_backend=backend) as w:
+        done = 0
+        while done < n:
+            m = min(chunk, n - done)
+            rec = laspy.ScaleAwarePointRecord.zeros(m, header=header)
+            xyz = building_points(m, rng)
+            rec.x = xyz[:, 0] + 500_000.0
+            rec.y = xyz[:, 1] + 4_000_000.0
+            rec.z = xyz[:, 2]
+            rec.intensity = rng.integers(0, 4096, m)
+            rec.return_number = np.ones(m, np.uint8)
+            rec.number_of_returns = np.ones(m, np.uint8)
+            rec.classification = rng.integers(0, 8, m)
+            rec.gps_time = done + np.arange(m) * 1e-5
+            shade = rng.integers(0, 200, m)
+            rec.red, rec.green, rec.blue = shade * 256, (shade + 20) * 256, (shade + 40) * 256
+            w.write_points(rec)
+            done += m
+
+
+def _laspy_read(path: str, parallel: bool) -> int:
+    import laspy
+
+    backend = laspy.LazBackend.LazrsParallel if parallel else laspy.LazBackend.Lazrs
+    las = laspy.read(path, laz_backend=backend)
+    return len(las.points)
+
+
+def run(quick: bool = False) -> dict[str, Any]:
+    from distributed import Client, LocalCluster
+
+    import engine  # noqa: F401 (configuration defaults)
+    from tiles.ingest import ingest
+
+    n = 1_000_000 if quick else 20_000_000
+    work = tempfile.mkdtemp(prefix="bench-ingest-")
+    rows: list[dict[str, Any]] = []
+    try:
+        laz, las = os.path.join(work, "cloud.laz"), os.path.join(work, "cloud.las")
+        t0 = time.perf_counter()
+        write_cloud(laz, n, compress=True)
+        write_cloud(las, n, compress=False)
+        gen_s = time.perf_counter() - t0
+
+        def measure(label: str, fn) -> dict[str, Any]:
+            with common.PeakMemory() as mem:
+                t = time.perf_counter()
+                count = fn()
+                s = time.perf_counter() - t
+            assert count == n, f"{label}: {count} points of {n}"
+            row = {"what": label, "seconds": round(s, 2), "points_per_s": round(n / s),
+                   "peak_total_mib": common.mib(mem.peak_total), "peak_single_mib": common.mib(mem.peak_single)}
+            rows.append(row)
+            return row
+
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                          silence_logs=logging.ERROR, memory_limit="6GiB") as cluster, Client(cluster) as client:
+            client.run(lambda: __import__("tiles.ingest"))  # warm imports on the workers
+            dask.config.set({"buildingparser.progress": "never"})
+
+            def ours(path: str, name: str):
+                def go() -> int:
+                    return ingest([path], os.path.join(work, name), client=client).meta.point_count
+                return go
+
+            ref_laz = measure("laspy LAZ, 2 threads (lazrs parallel)", lambda: _laspy_read(laz, True))
+            measure("laspy LAZ, 1 thread (lazrs)", lambda: _laspy_read(laz, False))
+            ing_laz = measure("ingest LAZ, 2 workers", ours(laz, "laz.zarr"))
+            ref_las = measure("laspy LAS (read into memory)", lambda: _laspy_read(las, True))
+            ing_las = measure("ingest LAS, 2 workers", ours(las, "las.zarr"))
+        laz_ratio = ing_laz["seconds"] / ref_laz["seconds"]
+        las_ratio = ing_las["seconds"] / ref_las["seconds"]
+        summary = {"points": n, "laz_mib": common.mib(os.path.getsize(laz)),
+                   "ingest_laz_vs_laspy_2_threads": round(laz_ratio, 2), "target": 1.3,
+                   "ingest_las_vs_laspy_read": round(las_ratio, 2), "generate_s": round(gen_s, 1),
+                   "cpus": os.cpu_count()}
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return {"name": "ingest", "rows": rows, "summary": summary,
+            "tracked": {"ingest_laz_vs_laspy": {"value": laz_ratio, "better": "lower", "kind": "speed"},
+                        "ingest_las_vs_laspy": {"value": las_ratio, "better": "lower", "kind": "speed"}}}
+
+
+if __name__ == "__main__":
+    common.main(run, "Ingest of a large LAZ/LAS file on 2 workers next to laspy's own decode.")
