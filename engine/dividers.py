@@ -125,7 +125,7 @@ def vertical_params(**overrides: Any) -> DividerParams:
     above it the void reaches 1.5 m and more, hence stop widths of 0.10-2.0 m.
     """
     base = dict(stop_min=0.10, stop_max=2.0, stop_steps=14, pass_widths=(0.04, 0.08, 0.16, 0.32),
-                min_spacing=1.5, empty_run=2.5, max_void_ratio_full=0.35)
+                min_spacing=0.5, empty_run=2.5, max_void_ratio_full=0.35)
     base.update(overrides)
     return DividerParams(**base)
 
