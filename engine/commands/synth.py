@@ -20,8 +20,8 @@ Only what a scanner inside each space sees gets points: wall faces but never the
 inside of a wall, no floor under a bookcase, no wall behind it.
 
 Density: points per m^2 of scanned surface, before each space's own factor
-(x0.5 to x2).  The default (buildingparser.synth.density, 7000) gives about
-36 000 points per m^2 of floor, as in S3DIS (215 M points over 6 000 m^2).
+(x0.5 to x2).  The default (buildingparser.synth.density, 8000) gives about
+35 000 points per m^2 of floor, as S3DIS (215 M points over 6 020 m^2).
 
 Formats (--format, default: laz if OUT ends in .las/.laz, else store):
   store   a tile store with gt_space, gt_class, gt_instance and meta/ground_truth
@@ -54,7 +54,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--floors", type=int, default=1, metavar="F", help="storeys (default 1)")
     parser.add_argument("--density", type=float, metavar="D",
                         help="points per m^2 of scanned surface before each space's x0.5-x2 factor "
-                             "(default: buildingparser.synth.density, 7000: S3DIS-like)")
+                             "(default: buildingparser.synth.density, 8000: S3DIS-like)")
     parser.add_argument("--yaw", type=float, default=0.0, metavar="DEG",
                         help="rotate the whole building by DEG degrees about the vertical (default 0)")
     parser.add_argument("--offset", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),

@@ -260,10 +260,35 @@ class Building:
 
     # -- the ground-truth document -------------------------------------------------------
     def ground_truth(self, counts: dict[str, dict[int, int]] | None = None) -> dict[str, Any]:
-        """The ``meta/ground_truth`` document (world coordinates), see :mod:`tiles.groundtruth`.
+        """The ``meta/ground_truth`` document (world coordinates, metres, yaw in radians).
 
-        ``counts`` (``{"spaces": {id: n}, "elements": {id: n}}``) adds the scanned
-        point count of every space and element as ``points``.
+        The fields of :mod:`tiles.groundtruth` (``spaces``: id, name, type,
+        floor, footprint, z_range; ``elements``: id, class, class_code, space,
+        center, size, yaw), plus:
+
+        * per space: ``area`` (m^2 of clear floor), ``doors`` and ``windows``
+          (opening ids), ``neighbours`` (spaces behind its doors), ``walls``
+          (wall ids around it), ``scanners`` (scan positions ``[x, y, z]``),
+          ``points`` (scanned points, when ``counts`` is given);
+        * per element: ``points``; ``opening`` (doors, windows: the opening id),
+          ``partial`` (a partial wall), ``engaged`` (a column against a wall),
+          ``kind`` (clutter: monitor, bin, plant, light, toilet, ...);
+        * ``walls``: ``{id, floor, kind (exterior | interior | partial),
+          segment [[x, y], [x, y]] (centre line), thickness, z_range,
+          spaces [left, right] (-1 outside), openings}`` -- the void between
+          the faces is ``thickness`` wide, along the whole segment;
+        * ``openings``: ``{id, kind (door | window), wall, spaces, center,
+          width, height, yaw, elements}``, doors also ``leaf`` (open | closed |
+          none), ``leaves`` (1 | 2) and ``leaf_space``;
+        * ``floors``: ``{index, z (floor level), ceiling_max, slab [z0, z1]}``;
+        * ``building``: the generation parameters, ``yaw_deg``, ``offset``, ``floor_area_m2``.
+
+        Instances: one ``wall`` per edge of a space's clear footprint (a face,
+        as S3DIS annotates walls per room); one ``door`` per side of a door
+        opening; every clutter object is its own instance, so every generated
+        point has ``gt_instance >= 0``.  Boxes contain all of their instance's
+        points (geometry grown by the space's noise bound, 3 sigma + 1 mm).
+        ``counts`` is ``{"spaces": {id: n}, "elements": {id: n}}``.
         """
         fr = self.frame
         spaces, elements = [], []
@@ -276,7 +301,6 @@ class Building:
                 elements.append(GTElement(e.id, e.cls, e.class_code, s.id, [float(v) for v in c],
                                           [float(v) for v in e.size], float(fr.angle(e.yaw))))
         doc = make_doc(spaces, elements)
-        walls_of = {s.id: s for s in self.spaces}
         for d, s in zip(doc["spaces"], self.spaces):
             d["area"] = round(s.area, 4)
             d["neighbours"] = sorted({o for oid in s.doors for o in self._door_spaces(oid) if o != s.id})
@@ -297,7 +321,6 @@ class Building:
                           "slab": [v + fr.offset[2] for v in f.slab]} for f in self.floors]
         doc["building"] = dict(self.params, yaw_deg=math.degrees(fr.yaw), offset=list(fr.offset),
                                floor_area_m2=round(self.floor_area, 3))
-        del walls_of
         return doc
 
     def _door_spaces(self, opening_id: int) -> list[int]:

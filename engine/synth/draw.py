@@ -33,9 +33,11 @@ def draw_plan(building: Building, path: str, *, counts: dict | None = None, dpi:
     floors = sorted({s.floor for s in building.spaces})
     allxy = fr.xy(np.concatenate([s.footprint for s in building.spaces])) - origin
     span = allxy.max(0) - allxy.min(0) + 4
-    per = 9.0 / max(span)
-    w, h = max(4.0, span[0] * per * 1.2), max(3.0, span[1] * per)
-    fig, axes = plt.subplots(len(floors), 1, figsize=(w + 2.5, h * len(floors) + 0.6), squeeze=False)
+    per = float(np.clip(9.0 / max(span), 1 / 4.0, 0.5))  # inches per metre: readable at any size, at most 60 in
+    per = min(per, 60.0 / max(span))
+    w, h = max(4.0, span[0] * per), max(3.0, span[1] * per)
+    font = float(np.clip(per * 24, 3.5, 8.0))
+    fig, axes = plt.subplots(len(floors), 1, figsize=(w + 2.5, (h + 0.6) * len(floors) + 0.4), squeeze=False)
     cmap = plt.get_cmap("tab20")
     for ax, f in zip(axes[:, 0], floors):
         spaces = [s for s in building.spaces if s.floor == f]
@@ -56,7 +58,8 @@ def draw_plan(building: Building, path: str, *, counts: dict | None = None, dpi:
         boxes, colours = [], []
         for s in spaces:
             for e in s.elements:
-                if e.cls not in BOX_COLOURS or (e.cls == "wall" and not e.info.get("partial")):
+                if e.cls not in BOX_COLOURS or (e.cls == "wall" and not e.info.get("partial")) \
+                        or e.info.get("kind") == "light":
                     continue
                 c, sz, yaw = e.center, e.size, e.yaw
                 ca, sa = math.cos(yaw), math.sin(yaw)
@@ -70,7 +73,7 @@ def draw_plan(building: Building, path: str, *, counts: dict | None = None, dpi:
             ax.plot(scan[:, 0], scan[:, 1], "k+", ms=4, mew=0.8)
             label = s.name if counts is None else f"{s.name}\n{counts['spaces'].get(s.id, 0):,}"
             c = poly.mean(0)
-            ax.text(c[0], c[1], label, fontsize=5.5, ha="center", va="center")
+            ax.text(c[0], c[1], label, fontsize=font, ha="center", va="center")
         ax.set_aspect("equal")
         ax.autoscale_view()
         ax.set_title(f"floor {f}", fontsize=9)
@@ -85,7 +88,7 @@ def draw_plan(building: Building, path: str, *, counts: dict | None = None, dpi:
     total = f", {sum(counts['spaces'].values()):,} points" if counts else ""
     fig.suptitle(f"synthetic building, seed {building.seed}: {len(building.spaces)} spaces, "
                  f"{building.floor_area:,.0f} m2{total}", fontsize=9)
-    fig.tight_layout(rect=(0, 0, 0.86, 0.97))
+    fig.tight_layout(rect=(0, 0, w / (w + 2.5), 0.97))
     path = os.fspath(path)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     tmp = os.path.join(os.path.dirname(os.path.abspath(path)), f".{os.path.basename(path)}.tmp-{uuid.uuid4().hex[:8]}.png")

@@ -150,8 +150,3 @@ def oriented_bounds(corners: np.ndarray, yaw: float) -> tuple[np.ndarray, np.nda
     local = corners @ rot
     lo, hi = local.min(0), local.max(0)
     return rot @ ((lo + hi) / 2), hi - lo
-
-
-def prim_corners(prim) -> np.ndarray:
-    """Corner points of any primitive (for bounding boxes)."""
-    return prim.corners()

@@ -202,10 +202,6 @@ def _floor_layouts(seed: int, floors: int, area_m2: float, rooms: int | None, ar
     return layouts
 
 
-TYPE_NAMES = {"office": "office", "conferenceRoom": "conferenceRoom", "hallway": "hallway", "lobby": "lobby",
-              "storage": "storage", "WC": "WC", "openspace": "openspace"}
-
-
 def _room_type(rng: np.random.Generator, d: Draft) -> str:
     if d.type in ("hallway", "lobby", "openspace"):
         return d.type
