@@ -8,8 +8,12 @@ fall-off with distance from the nearest scan position.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from engine.synth.building import Space
 
 WALLS = [(205, 200, 190), (190, 185, 170), (215, 212, 205), (180, 175, 160), (200, 195, 180), (175, 180, 182),
          (196, 184, 160), (170, 185, 175), (220, 210, 190)]
@@ -63,7 +67,7 @@ def building_style(rng: np.random.Generator) -> dict:
     }
 
 
-def space_colours(rng: np.random.Generator, space, style: dict) -> None:
+def space_colours(rng: np.random.Generator, space: "Space", style: dict) -> None:
     """Per-space colours and scan character (density factor x0.5-x2, noise 2-6 mm, brightness)."""
     wall = style["wall"] if rng.random() < 0.7 else pick(rng, WALLS)
     if space.type in ("WC", "storage") or rng.random() < 0.25:

@@ -33,7 +33,8 @@ Part = tuple[float, float, float, float, float, float, tuple]  # cx, cy, cz, sx,
 
 
 # -- pieces (local frames) -----------------------------------------------------------------
-def table(rng, w, d, h, rgb) -> list[Part]:
+def table(rng: np.random.Generator, w: float, d: float, h: float, rgb: tuple) -> list[Part]:
+    """A table or desk ``w`` x ``d``, top at ``h``: a top on four legs, or on side panels with a modesty panel."""
     top = 0.03
     parts: list[Part] = [(0, 0, h - top / 2, w, d, top, rgb)]
     if rng.random() < 0.6:
@@ -48,7 +49,8 @@ def table(rng, w, d, h, rgb) -> list[Part]:
     return parts
 
 
-def chair(rng, rgb) -> list[Part]:
+def chair(rng: np.random.Generator, rgb: tuple) -> list[Part]:
+    """An office chair (post and star base, maybe armrests) or a four-legged chair; back towards +y."""
     seat_z = rng.uniform(0.42, 0.5)
     parts: list[Part] = [(0, 0, seat_z, 0.46, 0.46, 0.07, rgb),
                          (0, 0.2, seat_z + 0.04 + 0.23, 0.44, 0.06, 0.46, rgb)]
@@ -67,7 +69,8 @@ def chair(rng, rgb) -> list[Part]:
     return parts
 
 
-def sofa(rng, w, rgb) -> list[Part]:
+def sofa(rng: np.random.Generator, w: float, rgb: tuple) -> list[Part]:
+    """A sofa ``w`` wide: a base on the floor (hiding it), cushions, back and arms."""
     d, h = rng.uniform(0.8, 0.95), rng.uniform(0.75, 0.9)
     return [(0, 0, 0.21, w, d, 0.42, rgb),
             (0, -0.08, 0.47, w - 0.36, d - 0.25, 0.1, rgb),
@@ -76,7 +79,8 @@ def sofa(rng, w, rgb) -> list[Part]:
             (w / 2 - 0.09, 0, 0.52, 0.18, d, 0.2, rgb)]
 
 
-def bookcase(rng, w, d, h, rgb) -> list[Part]:
+def bookcase(rng: np.random.Generator, w: float, d: float, h: float, rgb: tuple) -> list[Part]:
+    """Open shelves with books of random widths and colours, or a closed cabinet; back towards +y."""
     parts: list[Part] = []
     for sx in (-1, 1):
         parts.append((sx * (w / 2 - 0.01), 0, h / 2, 0.02, d, h, rgb))
@@ -106,12 +110,13 @@ def bookcase(rng, w, d, h, rgb) -> list[Part]:
     return parts
 
 
-def board(rng, w, h, bottom, rgb) -> list[Part]:
+def board(rng: np.random.Generator, w: float, h: float, bottom: float, rgb: tuple) -> list[Part]:
+    """A thin board on a wall (back at +y) from ``bottom`` up, with a pen tray."""
     return [(0, 0.05 - 0.01, bottom + h / 2, w, 0.02, h, rgb),
             (0, 0.05 - 0.04, bottom - 0.01, 0.6 * w, 0.06, 0.02, C.METAL)]
 
 
-def clutter(rng, kind: str, z: float = 0.0) -> tuple[list[Part], tuple[float, float]]:
+def clutter(rng: np.random.Generator, kind: str, z: float = 0.0) -> tuple[list[Part], tuple[float, float]]:
     """A clutter object standing at height ``z``; also its footprint (w, d)."""
     rgb = C.vivid(rng)
     if kind == "monitor":
