@@ -31,11 +31,11 @@ import dask
 import numpy as np
 import zarr
 
-from tiles import paths
+from tiles import paths, zarrio
 from tiles.errors import UserError
 from tiles.schema import (META_KEY, POINT_INDEX, SCHEMA_VERSION, Dimension, Part, Source, StoreMeta,
                           TileInfo)
-from tiles.store import TILE_CHUNK, TileStore, _open_group, tile_compressor, tile_name, utc_now
+from tiles.store import TileStore, _open_group, tile_name, utc_now
 from tiles.tasks import run_tasks
 
 
@@ -269,14 +269,14 @@ def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int]]], builder
                 a = a + firsts[part_id]
             pieces[j].append(a)
             off += count * dt.itemsize
-    tile = _open_group(paths.join(builder.build_url, "tiles", tile_name(*key)), builder.storage_options,
-                       mode="w")
+    tile_url = paths.join(builder.build_url, "tiles", tile_name(*key))
+    _open_group(tile_url, builder.storage_options, mode="w")
     n = 0
     for d, p in zip(builder.dimensions, pieces):
         values = np.concatenate(p)
         n = len(values)
-        _write_whole(tile, d.name, values)
-    _write_whole(tile, "part_offsets", offsets)
+        zarrio.write_array(tile_url, d.name, values, builder.storage_options)
+    zarrio.write_array(tile_url, "part_offsets", offsets, builder.storage_options)
     return n
 
 
@@ -314,12 +314,6 @@ def _read_staging(builder: StoreBuilder, part_id: int, offset: int, size: int) -
     if len(data) != size:
         raise RuntimeError(f"staging file of part {part_id} is short: {len(data)} of {size} bytes at {offset}")
     return data
-
-
-def _write_whole(group: zarr.Group, name: str, values: np.ndarray) -> None:
-    """Create a tile array and write all of it from this one task."""
-    n = len(values)
-    group.create_array(name, data=values, chunks=(min(TILE_CHUNK, max(n, 1)),), compressors=tile_compressor())
 
 
 def _looks_like_store(url: str) -> bool:
