@@ -300,20 +300,25 @@ def _walls(drafts: dict[int, Draft], floor: int, z: float, spaces: list[Space], 
 
 
 def _joint_reach(walls: list[Wall]) -> None:
-    """How far each wall body reaches past its ends: half the thickness of the walls it meets there."""
-    for w in walls:
+    """How far each wall body reaches past its ends: half the thickness of the walls it meets there.
+
+    Vectorised over the walls for each end (a building has thousands of walls).
+    """
+    if not walls:
+        return
+    p0 = np.array([w.p0 for w in walls], float)
+    d = np.array([w.direction for w in walls])
+    n = np.c_[-d[:, 1], d[:, 0]]
+    length = np.array([w.length for w in walls])
+    half = np.array([w.thickness for w in walls]) / 2
+    for k, w in enumerate(walls):
+        perpendicular = np.abs(d @ d[k]) <= 1e-9
         for end in (0, 1):
-            p = np.asarray(w.p0 if end == 0 else w.p1)
-            reach = 0.0
-            for o in walls:
-                if o is w or abs(float(np.dot(o.direction, w.direction))) > 1e-9:
-                    continue
-                # does o's centre line pass through p?
-                rel = p - np.asarray(o.p0)
-                along = float(np.dot(rel, o.direction))
-                off = float(np.dot(rel, o.normal))
-                if abs(off) < 1e-6 and -1e-6 <= along <= o.length + 1e-6:
-                    reach = max(reach, o.thickness / 2)
+            rel = np.asarray(w.p0 if end == 0 else w.p1) - p0
+            along = np.einsum("ij,ij->i", rel, d)
+            off = np.einsum("ij,ij->i", rel, n)
+            meets = perpendicular & (np.abs(off) < 1e-6) & (along >= -1e-6) & (along <= length + 1e-6)
+            reach = float(half[meets].max()) if meets.any() else 0.0
             if w.kind == "partial" and reach == 0.0:
                 continue
             if end == 0:

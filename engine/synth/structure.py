@@ -321,7 +321,10 @@ def place_scanners(rng: np.random.Generator, space: Space, spacing: float = 5.0)
         inner = poly
     boxes = [b for e in space.elements for b in e.prims if isinstance(b, Box)
              and b.center[2] - b.size[2] / 2 < space.z0 + 1.9]
-    blocked = shapely.union_all([Polygon(b.corners()[[0, 2, 6, 4], :2]).buffer(0.3) for b in boxes]) if boxes else None
+    blocked = None
+    if boxes:
+        feet = shapely.polygons(np.array([b.corners()[[0, 2, 6, 4], :2] for b in boxes]))
+        blocked = shapely.union_all(shapely.buffer(feet, 0.3, quad_segs=2))
     free = inner.difference(blocked) if blocked is not None else inner
     if free.is_empty:
         free = inner
