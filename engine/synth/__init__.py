@@ -6,6 +6,25 @@ openings, elements made of primitives) and :func:`scan_part` /
 :func:`scan_building` (the per-point columns of one part / of all parts).
 :func:`generate` does both and writes a tile store, a LAS/LAZ file or the raw
 S3DIS layout, one dask task per part.
+
+Modules: :mod:`~engine.synth.layout` (cells of a floor), :mod:`~engine.synth.plan`
+(walls, doors, windows, parts), :mod:`~engine.synth.structure` (wall faces,
+floor, ceiling, doors, windows, columns, beams, scanners),
+:mod:`~engine.synth.furniture`, :mod:`~engine.synth.colours`,
+:mod:`~engine.synth.geometry` (the primitives), :mod:`~engine.synth.scan`,
+:mod:`~engine.synth.writers`, :mod:`~engine.synth.draw`, :mod:`~engine.synth.api`.
+
+Where harder, real-scan conditions plug in (not built yet): walls are general
+segments with a thickness and footprints come from shapely polygon algebra, so
+diagonal or curved (polyline) walls only need a layout that emits them; a
+per-space rigid perturbation before ``Frame.xyz`` in ``scan_job`` gives
+registration offsets; a wall ``kind`` with glass-density faces gives glass
+partitions; a space flag that makes ``scan_job`` return nothing gives unscanned
+rooms; density/count knobs of ``furnish`` give heavy clutter and walls hidden by
+furniture; clutter panels (as WC stalls) give cubicles; thickness ranges in
+``plan._walls`` give very thin or thick walls; outliers along the scanner rays
+in ``scan_job`` give flying points; a ``stairs`` space with step boxes and a slab
+opening gives stairs.
 """
 from engine.synth.api import generate
 from engine.synth.building import Building, Element, Frame, Opening, PartSpec, Space, Wall

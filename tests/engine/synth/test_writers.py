@@ -83,6 +83,14 @@ def test_las_file_is_point_format_7_with_extra_bytes_and_gt_json(small, written)
     assert not [p for p in os.listdir(written["dir"] / "las") if p.startswith(".")]  # no leftovers
 
 
+def test_las_extension_writes_uncompressed(small, tmp_path):
+    write_las(small, str(tmp_path / "b.las"))
+    with laspy.open(tmp_path / "b.las") as f:
+        assert not f.header.are_points_compressed
+        assert f.header.point_count == len(scan_building(small)["x"])
+    assert (tmp_path / "gt.json").exists()
+
+
 def test_s3dis_layout_is_the_raw_dataset_layout(small, written):
     root = written["dir"] / "s3dis"
     assert sorted(os.listdir(root)) == ["Area_1", "gt.json"]
