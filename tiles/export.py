@@ -1,12 +1,19 @@
 """Export a tile store to LAS 1.4 / LAZ: every input dimension, the results and ground truth, input order.
 
-The file is written part by part (the ingest's parts, in order): a task per
-part gathers the part's rows from every tile (``part_offsets``), puts them back
-in input order (``point_index``) and packs them as LAS point records; the
-driver keeps a bounded window of such tasks in flight and appends their records
-to the file in order.  The file is written under a temporary name and renamed
-when complete (for URLs: written locally, uploaded under a temporary key,
-then moved).
+The file is written part by part (the ingest's parts, in order), in two
+steps so that every tile array is read once however many parts there are:
+
+1. one task per tile reads the whole tile, packs it as LAS point records and
+   stages them with their ``point_index`` in a scratch folder beside the store
+   (a tile holds its points in part order, so each part's records are one
+   contiguous byte range of the staged file);
+2. one task per part reads its byte range from each tile's staged file and
+   sorts the records back into input order; the driver keeps a bounded window
+   of such tasks in flight and appends their records to the file in order.
+
+The file is written under a temporary name and renamed when complete (for
+URLs: written locally, uploaded under a temporary key, then moved); the
+scratch folder is removed in any case.
 
 What goes where:
 
@@ -181,37 +188,76 @@ def pack_part(cols: dict[str, np.ndarray], layout: Layout) -> np.ndarray:
     return arr
 
 
-def _gather_part(job, store: TileStore, layout: Layout) -> np.ndarray:
-    """One task: the part's rows from each tile, in input order, packed as LAS records."""
-    k, runs = job
-    names = layout.store_names
-    pieces: dict[str, list[np.ndarray]] = {n: [] for n in names}
-    for tile, start, stop in runs:
-        got = store.read(tile, names, start, stop)
-        for n in names:
-            pieces[n].append(got[n])
-    cols = {n: (np.concatenate(v) if v else np.empty(0)) for n, v in pieces.items()}
-    order = np.argsort(cols.pop("point_index"), kind="stable")
-    cols = {n: v[order] for n, v in cols.items()}
-    return pack_part(cols, layout)
+def _pack_tile(tile, store: TileStore, layout: Layout, scratch: str) -> np.ndarray:
+    """Step 1, one task per tile: pack the whole tile as LAS records once and stage them with its point indices.
 
-
-def part_runs(store: TileStore, client=None) -> list[list[tuple[str, int, int]]]:
-    """For each part, the ``(tile, start, stop)`` rows holding its points."""
-    from tiles.tasks import run_tasks
-
-    meta = store.meta
-    offsets = run_tasks(_read_offsets, meta.tiles, client=None if len(meta.tiles) < 64 else client,
-                        label="reading part offsets", keys=[t.name for t in meta.tiles], extra_args=(store,))
-    runs: list[list[tuple[str, int, int]]] = [[] for _ in meta.parts]
-    for t, off in zip(meta.tiles, offsets):
-        for k in np.flatnonzero(np.diff(off) > 0):
-            runs[int(k)].append((t.name, int(off[k]), int(off[k + 1])))
-    return runs
-
-
-def _read_offsets(tile, store: TileStore) -> np.ndarray:
+    A tile keeps its points in part order, so the records of part ``k`` are the
+    contiguous rows ``part_offsets[k]:part_offsets[k+1]`` of the staged file.
+    Returns the tile's ``part_offsets``.
+    """
+    cols = store.read(tile, layout.store_names)
+    index = cols.pop("point_index")
+    records = pack_part(cols, layout)
+    _write_bytes(paths.join(scratch, f"{tile.name}.rec"), records, store.storage_options)
+    _write_bytes(paths.join(scratch, f"{tile.name}.idx"), index.astype(np.int64, copy=False), store.storage_options)
     return store.part_offsets(tile)
+
+
+def _gather_part(job, layout: Layout, scratch: str, storage_options) -> np.ndarray:
+    """Step 2, one task per part: its records from each tile's staged file, put back in input order."""
+    k, runs = job
+    dtype = layout.point_format_obj().dtype()
+    size = dtype.itemsize
+    recs, idx = [], []
+    for tile, start, stop in runs:
+        raw = _read_range(paths.join(scratch, f"{tile}.rec"), start * size, (stop - start) * size, storage_options)
+        recs.append(np.frombuffer(raw, dtype=dtype))
+        raw = _read_range(paths.join(scratch, f"{tile}.idx"), start * 8, (stop - start) * 8, storage_options)
+        idx.append(np.frombuffer(raw, dtype=np.int64))
+    if not recs:
+        return np.zeros(0, dtype=dtype)
+    order = np.argsort(np.concatenate(idx), kind="stable")
+    return np.concatenate(recs)[order]
+
+
+def _write_bytes(url: str, values: np.ndarray, storage_options) -> None:
+    if paths.is_local(url):
+        with open(paths.local_path(url), "wb") as f:
+            f.write(memoryview(np.ascontiguousarray(values)).cast("B"))
+    else:
+        fs, p = paths.filesystem(url, storage_options)
+        fs.pipe_file(p, np.ascontiguousarray(values).tobytes())
+
+
+def _read_range(url: str, offset: int, size: int, storage_options) -> bytes:
+    if paths.is_local(url):
+        with open(paths.local_path(url), "rb") as f:
+            f.seek(offset)
+            data = f.read(size)
+    else:
+        fs, p = paths.filesystem(url, storage_options)
+        data = fs.cat_file(p, start=offset, end=offset + size)
+    if len(data) != size:
+        raise RuntimeError(f"export staging file {url} is short: {len(data)} of {size} bytes at {offset}")
+    return data
+
+
+def _scratch_for(store: TileStore) -> str:
+    """A temporary folder for the packed tiles: ``buildingparser.export.scratch`` if set, else beside the
+    store (reachable by every worker that can read the store)."""
+    tag = f".export-{uuid.uuid4().hex[:8]}"
+    base = dask.config.get("buildingparser.export.scratch", None)
+    if base:
+        path = paths.join(paths.normalize(base), tag.lstrip("."))
+        if paths.is_local(path):
+            os.makedirs(paths.local_path(path))
+        return path
+    if paths.is_local(store.url):
+        head, tail = os.path.split(paths.local_path(store.url))
+        path = os.path.join(head, f".{tail}{tag}")
+        os.makedirs(path)
+        return path
+    return store.url + tag
 
 
 def build_header(store: TileStore, layout: Layout) -> tuple[laspy.LasHeader, list]:
@@ -288,7 +334,6 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     meta = store.meta
     layout = plan_layout(store, point_format)
     header, evlrs = build_header(store, layout)
-    runs = part_runs(store, client)
     if window is None:
         window = dask.config.get("buildingparser.export.window", None)
         if window is None:
@@ -303,12 +348,21 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
         tmpdir = tempfile.mkdtemp(prefix="buildingparser-export-")
         tmp = os.path.join(tmpdir, "out" + ext)
     written = 0
+    scratch = _scratch_for(store)
     try:
+        from tiles.tasks import run_tasks
+
+        offsets = run_tasks(_pack_tile, meta.tiles, client=client, label="packing tiles",
+                            keys=[t.name for t in meta.tiles], extra_args=(store, layout, scratch))
+        runs: list[list[tuple[str, int, int]]] = [[] for _ in meta.parts]
+        for t, off in zip(meta.tiles, offsets):
+            for k in np.flatnonzero(np.diff(off) > 0):
+                runs[int(k)].append((t.name, int(off[k]), int(off[k + 1])))
         backend = laspy.LazBackend.LazrsParallel if ext == ".laz" else None
         with open(tmp, "wb") as f:
             writer = laspy.LasWriter(f, header, do_compress=(ext == ".laz"), laz_backend=backend, closefd=False)
             pf = writer.header.point_format
-            for arr in _ordered_results(runs, store, layout, client, window):
+            for arr in _ordered_results(runs, layout, scratch, store.storage_options, client, window):
                 if arr.dtype != pf.dtype():
                     raise RuntimeError("packed records do not match the point format")
                 writer.write_points(laspy.PackedPointRecord(arr, pf))
@@ -330,6 +384,7 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
             os.remove(tmp)
         raise
     finally:
+        paths.remove(scratch, store.storage_options)
         if tmpdir is not None:
             import shutil
 
@@ -339,14 +394,14 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
             "point_format": layout.point_format, "extra_dimensions": [e["name"] for e in layout.extra]}
 
 
-def _ordered_results(runs, store: TileStore, layout: Layout, client, window: int):
-    """Packed parts in order, at most ``window`` tasks in flight."""
+def _ordered_results(runs, layout: Layout, scratch: str, storage_options, client, window: int):
+    """Packed parts in order, at most ``window`` part tasks in flight."""
     from tiles.tasks import Progress
 
     progress = Progress("writing points", len(runs))
     if client is None:
         for k, r in enumerate(runs):
-            yield _gather_part((k, r), store, layout)
+            yield _gather_part((k, r), layout, scratch, storage_options)
             progress.update()
         return
     retries = int(dask.config.get("buildingparser.retries", 2))
@@ -355,14 +410,12 @@ def _ordered_results(runs, store: TileStore, layout: Layout, client, window: int
     try:
         while nxt < len(runs) or pending:
             while nxt < len(runs) and len(pending) < window:
-                pending.append(client.submit(_gather_part, (nxt, runs[nxt]), store, layout, pure=False,
-                                             retries=retries, key=f"export-part-{nxt}-{uuid.uuid4().hex[:6]}"))
+                pending.append(client.submit(_gather_part, (nxt, runs[nxt]), layout, scratch, storage_options,
+                                             pure=False, retries=retries,
+                                             key=f"export-part-{nxt}-{uuid.uuid4().hex[:6]}"))
                 nxt += 1
             fut = pending.popleft()
-            try:
-                arr = fut.result()
-            except UserError:
-                raise
+            arr = fut.result()
             yield arr
             fut.release()
             progress.update()

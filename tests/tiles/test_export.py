@@ -13,6 +13,7 @@ from tiles.errors import UserError
 from tiles.export import export, gather_points, plan_layout
 from tiles.ingest import ingest
 from tiles.schema import Dimension
+from tiles.tasks import TaskFailures
 
 SAMPLES_DIR = pathlib.Path(__file__).resolve().parents[2].parent / "shared" / "data" / "las-samples"
 SAMPLES = sorted(p.relative_to(SAMPLES_DIR).as_posix() for p in SAMPLES_DIR.glob("*/*.la[sz]")) \
@@ -158,7 +159,7 @@ def test_existing_output_refused_and_no_partial_file_on_failure(tmp_path, monkey
         return real(cols, layout)
 
     monkeypatch.setattr(ex, "pack_part", failing)
-    with pytest.raises(RuntimeError, match="disk on fire"):
+    with pytest.raises(TaskFailures, match="disk on fire"):
         export(store, str(tmp_path / "new.laz"))
     assert sorted(os.listdir(tmp_path)) == ["in.las", "out.las", "s.zarr"]
 
