@@ -275,15 +275,30 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
 
 
 def _ground_truth_docs(readers, stats, grid) -> dict[str, Any]:
+    """``meta/ground_truth``: built from S3DIS annotations, or a LAS source's ``gt.json``; merged when the
+    sources' ids do not overlap, else left out with a warning."""
     from tiles.groundtruth import DOC, make_doc
 
-    spaces, elements = [], []
+    docs = []
     for r, st in zip(readers, stats):
         if hasattr(r, "ground_truth"):
             s, e = r.ground_truth(st, grid)
-            spaces += s
-            elements += e
-    if not spaces and not elements:
+            if s or e:
+                docs.append((r.path, make_doc(s, e)))
+        elif getattr(r, "ground_truth_document", None) and r.ground_truth_document():
+            docs.append((r.path, r.ground_truth_document()))
+    if not docs:
         return {}
-    return {DOC: make_doc(spaces, elements)}
-
+    if len(docs) == 1:
+        return {DOC: docs[0][1]}
+    merged: dict[str, Any] = {"spaces": [], "elements": []}
+    for _, d in docs:
+        merged["spaces"] += d.get("spaces", [])
+        merged["elements"] += d.get("elements", [])
+    for key in ("spaces", "elements"):
+        ids = [x.get("id") for x in merged[key]]
+        if len(ids) != len(set(ids)):
+            warnings.warn(f"the ground-truth documents of {', '.join(p for p, _ in docs)} number their {key} "
+                          "alike: no meta/ground_truth document is stored", stacklevel=3)
+            return {}
+    return {DOC: merged}

@@ -13,7 +13,9 @@ pipeline's result ``classification`` must not overwrite it), and each
 extra-bytes dimension raw (scaled ones keep their integers; their scales and
 offsets go in ``Dimension.las``), one array per element of array types.
 Extra-bytes dimensions named ``gt_space``, ``gt_class``, ``gt_instance`` (the
-synthetic generator's ground truth) become the store's ground-truth arrays.
+synthetic generator's ground truth) become the store's ground-truth arrays, and
+a ``gt.json`` beside such a file (the generator writes one) becomes the store's
+``meta/ground_truth`` document.
 
 Waveform data packets stored inside the file are not carried (a warning says
 so); the per-point wave packet fields are kept.  COPC files are read as LAZ
@@ -144,6 +146,33 @@ class LasReader(Reader):
                 self._check_las(header, size)
         self._header_facts(header)
         self._build_dimensions(header)
+        self._gt_doc = self._sidecar_ground_truth()
+
+    def _sidecar_ground_truth(self) -> dict[str, Any] | None:
+        """The ground-truth document ``gt.json`` beside a file with ground-truth arrays (the generator's)."""
+        import json
+
+        from tiles import paths
+
+        if not any(d.kind == "ground_truth" for d in self.dimensions):
+            return None
+        sidecar = paths.join(self.path.rsplit("/", 1)[0], "gt.json") if "/" in self.path else "gt.json"
+        if not paths.exists(sidecar, self.storage_options):
+            return None
+        try:
+            with open_binary(sidecar, self.storage_options) as f:
+                doc = json.loads(f.read())
+        except (OSError, ValueError) as exc:
+            raise UserError(sidecar, f"unreadable ground-truth document ({exc})") from None
+        if not isinstance(doc, dict) or not isinstance(doc.get("spaces"), list) \
+                or not isinstance(doc.get("elements"), list):
+            raise UserError(sidecar, "not a ground-truth document (no 'spaces' and 'elements' lists)")
+        self.gt_sidecar = sidecar
+        return doc
+
+    def ground_truth_document(self) -> dict[str, Any] | None:
+        """The ground-truth document found beside the file, if any (driver side)."""
+        return self._gt_doc
 
     # -- checks on the driver ---------------------------------------------------------------
     def _check_las(self, header: laspy.LasHeader, size: int) -> None:
@@ -227,6 +256,7 @@ class LasReader(Reader):
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
         state.pop("_table", None)  # the chunk table travels in the part specs, not with every task
+        state.pop("_gt_doc", None)
         return state
 
     def _header_facts(self, header: laspy.LasHeader) -> None:
@@ -430,6 +460,8 @@ class LasReader(Reader):
             info["requantized_max_error_m"] = worst
         if getattr(self, "trailing_bytes", 0):
             info["trailing_bytes"] = self.trailing_bytes
+        if getattr(self, "gt_sidecar", None):
+            info["ground_truth_document"] = self.gt_sidecar
         return info
 
     def warnings(self, info: dict[str, Any]) -> list[str]:

@@ -223,3 +223,22 @@ def test_export_of_samples_is_identical_point_for_point(shared_data, tmp_path):
     a, b = laspy.read(str(path)), laspy.read(str(tmp_path / "out.laz"))
     assert a.points.array.dtype == b.points.array.dtype
     np.testing.assert_array_equal(a.points.array, b.points.array)
+
+
+def test_ground_truth_document_beside_a_file_is_kept(tmp_path):
+    import json
+
+    dims = [laspy.ExtraBytesParams("gt_space", "i4"), laspy.ExtraBytesParams("gt_class", "u1"),
+            laspy.ExtraBytesParams("gt_instance", "i4")]
+    write_las(tmp_path / "gen.laz", 300, fmt=7, extra=dims)
+    doc = {"spaces": [{"id": 0, "name": "office_1", "type": "office", "floor": 0, "footprint": None,
+                       "z_range": [0.0, 3.0]}], "elements": [], "walls": []}
+    (tmp_path / "gt.json").write_text(json.dumps(doc))
+    s = ingest([str(tmp_path / "gen.laz")], str(tmp_path / "s.zarr"))
+    assert s.doc("ground_truth") == doc
+    assert s.meta.sources[0].info["ground_truth_document"] == str(tmp_path / "gt.json")
+    (tmp_path / "gt.json").write_text("[1, 2]")
+    with pytest.raises(UserError, match="not a ground-truth document"):
+        ingest([str(tmp_path / "gen.laz")], str(tmp_path / "t.zarr"))
+    write_las(tmp_path / "plain.las", 50)  # no ground-truth arrays: gt.json is not its business
+    assert ingest([str(tmp_path / "plain.las")], str(tmp_path / "u.zarr")).doc("ground_truth") is None
