@@ -195,13 +195,13 @@ def max_pool(br: BankResponse) -> tuple[np.ndarray, np.ndarray]:
     return br.response[best, np.arange(br.response.shape[1])], best
 
 
-def _margins(cs: np.ndarray, med: np.ndarray, i: np.ndarray, d: int, c: int, ql: np.ndarray, qr: np.ndarray
+def _margins(cs: np.ndarray, med: np.ndarray, i0, i1, i2, i3, d, c, ql, qr
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Mean density of the left margin, right margin and gap of filter ``(d, c)`` at gap starts ``i``,
-    and the room level beside (the lower of the medians centred at ``ql`` and ``qr``)."""
-    lm = (cs[i] - cs[i - c]) / c
-    rm = (cs[i + d + c] - cs[i + d]) / c
-    gm = (cs[i + d] - cs[i]) / d
+    """Mean density of the left margin ``[i0, i1)``, right margin ``[i2, i3)`` and gap ``[i1, i2)``
+    (``cs``: cumulative counts), and the room level beside: the lower of the medians at ``ql`` and ``qr``."""
+    lm = (cs[i1] - cs[i0]) / c
+    rm = (cs[i3] - cs[i2]) / c
+    gm = (cs[i2] - cs[i1]) / d
     return lm, rm, gm, np.minimum(med[ql], med[qr])
 
 
@@ -245,6 +245,52 @@ def occupied_extent(hist: np.ndarray) -> tuple[int, int] | None:
     return int(nz[0]), int(nz[-1]) + 1
 
 
+def _evaluate(i, d, c, k, n: int, cs, med, ucs, umed, half: int, p: DividerParams, pool) -> None:
+    """Responses and tests of filters ``(d, c)`` (index ``k``) at gap starts ``i``; the valid ones are
+    max-pooled into ``pool`` = (best score, best filter, contrast, void ratio) on the half-bin grid.
+
+    ``i``, ``d``, ``c``, ``k`` broadcast together: scalars for one filter, or a
+    column of filters against a row of positions.
+    """
+    best, best_k, best_contrast, best_ratio = pool
+    fit = (i >= c) & (i + d + c <= n)
+    i0, i2, i3 = np.clip(i - c, 0, n), np.minimum(i + d, n), np.minimum(i + d + c, n)
+    ql = np.clip(i - c - half, 0, n - 1)
+    qr = np.minimum(i + d + c + half, n - 1)
+    lm, rm, gm, level = _margins(cs, med, i0, i, i2, i3, d, c, ql, qr)
+    limit = np.full(np.broadcast(fit, lm).shape, p.max_void_ratio_full)
+    if ucs is not None:
+        # above the doors, where the band holds enough points beside the gap: test the band
+        ulm, urm, ugm, ulevel = _margins(ucs, umed, i0, i, i2, i3, d, c, ql, qr)
+        band = ulevel * d >= p.min_gap_points
+        lm, rm, gm, level = (np.where(band, x, y) for x, y in ((ulm, lm), (urm, rm), (ugm, gm), (ulevel, level)))
+        limit = np.where(band, p.max_void_ratio, limit)
+    weaker = np.minimum(lm, rm)
+    r = 0.5 * (lm + rm) - gm  # the paper's two margins, with the gap subtracted
+    with np.errstate(divide="ignore", invalid="ignore"):
+        contrast = np.where(weaker > 0, 1.0 - gm / weaker, -np.inf)
+        ratio = np.where(level > 0, gm / level, np.inf)
+        score = np.where(level > 0, r / level, -np.inf)
+        prominence = np.where(level > 0, (np.maximum(lm, rm) - gm) / level, -np.inf)
+    valid = (fit & (r > 0) & (contrast >= p.min_contrast) & (weaker * d >= p.min_gap_points) & (level > 0)
+             & (ratio <= limit) & (prominence >= p.min_prominence))
+    idx = np.nonzero(valid)
+    if len(idx[0]) == 0:
+        return
+    shape = valid.shape
+    jj = np.broadcast_to(2 * i + d, shape)[idx]  # gap centre on the half-bin grid
+    kk = np.broadcast_to(k, shape)[idx]
+    sc, co, ra = score[idx], contrast[idx], ratio[idx]
+    # max-pooling over the bank at each gap centre: the best score, then the first filter
+    order = np.lexsort((kk, -sc, jj))
+    jj, kk, sc, co, ra = jj[order], kk[order], sc[order], co[order], ra[order]
+    first = np.r_[True, jj[1:] != jj[:-1]]
+    jj, kk, sc, co, ra = jj[first], kk[first], sc[first], co[first], ra[first]
+    better = sc > best[jj]
+    jj = jj[better]
+    best[jj], best_k[jj], best_contrast[jj], best_ratio[jj] = sc[better], kk[better], co[better], ra[better]
+
+
 def detect_dividers(hist: np.ndarray, params: DividerParams | None = None, *, start: float = 0.0,
                     upper: np.ndarray | None = None) -> list[Divider]:
     """The peak-gap-peak dividers of a density histogram, in increasing position.
@@ -284,36 +330,16 @@ def detect_dividers(hist: np.ndarray, params: DividerParams | None = None, *, st
     best_k = np.full(m, -1, dtype=np.int64)
     best_contrast = np.zeros(m)
     best_ratio = np.zeros(m)
-    for k, (d, c) in enumerate(bank):
-        i = np.arange(c, n - d - c + 1)
-        if len(i) == 0:
-            continue
-        ql = np.clip(i - c - half, 0, n - 1)
-        qr = np.clip(i + d + c + half, 0, n - 1)
-        lm, rm, gm, level = _margins(cs, med, i, d, c, ql, qr)
-        limit = np.full(len(i), p.max_void_ratio_full)
-        if up is not None:
-            # above the doors where the band holds enough points beside the gap: test the band
-            ulm, urm, ugm, ulevel = _margins(ucs, umed, i, d, c, ql, qr)
-            band = ulevel * d >= p.min_gap_points
-            lm, rm, gm, level = (np.where(band, x, y) for x, y in ((ulm, lm), (urm, rm), (ugm, gm), (ulevel, level)))
-            limit = np.where(band, p.max_void_ratio, limit)
-        weaker = np.minimum(lm, rm)
-        r = 0.5 * (lm + rm) - gm  # the paper's two margins, with the gap subtracted
-        with np.errstate(divide="ignore", invalid="ignore"):
-            contrast = np.where(weaker > 0, 1.0 - gm / weaker, -np.inf)
-            ratio = np.where(level > 0, gm / level, np.inf)
-            score = np.where(level > 0, r / level, -np.inf)
-            prominence = np.where(level > 0, (np.maximum(lm, rm) - gm) / level, -np.inf)
-        valid = ((r > 0) & (contrast >= p.min_contrast) & (weaker * d >= p.min_gap_points) & (level > 0)
-                 & (ratio <= limit) & (prominence >= p.min_prominence))
-        j = 2 * i + d
-        better = valid & (score > best[j])
-        jb = j[better]
-        best[jb] = score[better]
-        best_k[jb] = k
-        best_contrast[jb] = contrast[better]
-        best_ratio[jb] = ratio[better]
+    pool = (best, best_k, best_contrast, best_ratio)
+    if n * len(bank) <= 1 << 16:
+        # short histograms (most of them): all filters at once on (filters x positions) arrays
+        i = np.arange(n)[None, :]
+        _evaluate(i, bank[:, :1], bank[:, 1:], np.arange(len(bank))[:, None], n, cs, med, ucs, umed, half, p, pool)
+    else:
+        for k, (d, c) in enumerate(bank):  # long ones: filter by filter, over the positions where it fits
+            i = np.arange(c, n - d - c + 1)
+            if len(i):
+                _evaluate(i, d, c, k, n, cs, med, ucs, umed, half, p, pool)
     out: list[Divider] = []
     for j in non_maximum_suppression(best, 2 * p.bins(p.min_spacing), np.isfinite(best)):
         d, c = bank[best_k[j]]

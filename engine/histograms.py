@@ -224,22 +224,32 @@ class BoxIndex:
         f = self.ztab[np.clip(bz - self.z0, 0, len(self.ztab) - 1)]
         return np.where(f < len(self.floors), f, -1)
 
-    def block_of(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> np.ndarray:
-        """Flat block index of each point in the storeys' arrangements (negative: outside every box's range)."""
-        f = self.ztab[np.clip(bz - self.z0, 0, len(self.ztab) - 1)]
-        ui = np.clip(bu - (self.umin - 1), 0, self.nu + 1)
+    def band_of(self, f: np.ndarray, bz: np.ndarray, band_z: np.ndarray) -> np.ndarray:
+        """1 for points at or above their storey's upper-band z bin (``f``: storey rows of :meth:`blocks`)."""
+        return (bz >= np.append(np.asarray(band_z, np.int64), np.iinfo(np.int64).max)[f]).view(np.int8)
+
+    def block_of(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flat block index of each point in the storeys' arrangements (negative: outside every box's
+        range) and its storey row in the tables (``len(floors)``: none)."""
+        f = bz - self.z0
+        np.clip(f, 0, len(self.ztab) - 1, out=f)
+        f = self.ztab[f]
+        ui = bu - (self.umin - 1)
+        np.clip(ui, 0, self.nu + 1, out=ui)
         ui += f * (self.nu + 2)
-        vi = np.clip(bv - (self.vmin - 1), 0, self.nvb + 1)
+        vi = bv - (self.vmin - 1)
+        np.clip(vi, 0, self.nvb + 1, out=vi)
         vi += f * (self.nvb + 2)
         blk = self.ubase[ui]
         blk += self.vcol[vi]
-        return blk
+        return blk, f
 
-    def blocks(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(block, box)`` of each point: flat block index (negative: none) and box (-1: none)."""
-        blk = self.block_of(bu, bv, bz)
+    def blocks(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(block, box, storey)`` of each point: flat block index (negative: none), box (-1: none) and
+        storey (``len(floors)``: none)."""
+        blk, f = self.block_of(bu, bv, bz)
         box = self.flat[np.where(blk >= 0, blk, len(self.flat) - 1)]
-        return blk, box
+        return blk, box, f
 
     def locate(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> np.ndarray:
         """Box of each point, -1 outside every box."""
@@ -256,18 +266,29 @@ class SparseHist:
 
 
 def keyed_histogram(segment: np.ndarray, bins: np.ndarray) -> SparseHist:
-    """Counts per ``(segment, bin)`` of the points with ``segment >= 0``, in ONE bincount."""
-    keep = segment >= 0
-    seg, b = segment[keep], bins[keep]
-    if len(seg) == 0:
+    """Counts per ``(segment, bin)`` of the points with ``segment >= 0``, in ONE bincount.
+
+    Points with a negative segment go to a trash row that is dropped, so no
+    point is copied out; the bins span the tile's own range of ``bins``.
+    """
+    if len(segment) == 0:
         return SparseHist(np.zeros(0, np.int64), 0, np.zeros((0, 0), np.int64))
-    present = np.flatnonzero(np.bincount(seg))
-    rank = np.zeros(int(present[-1]) + 1, dtype=np.int64)
-    rank[present] = np.arange(len(present))
-    lo, hi = int(b.min()), int(b.max())
+    seg1 = np.maximum(segment, -1)
+    seg1 += 1  # 0: trash
+    per = np.bincount(seg1)
+    present = np.flatnonzero(per[1:])
+    if len(present) == 0:
+        return SparseHist(np.zeros(0, np.int64), 0, np.zeros((0, 0), np.int64))
+    rank = np.full(len(per), len(present), dtype=np.int64)
+    rank[present + 1] = np.arange(len(present))
+    lo, hi = int(bins.min()), int(bins.max())
     width = hi - lo + 1
-    counts = np.bincount(rank[seg] * width + (b - lo), minlength=len(present) * width)
-    return SparseHist(present, lo, counts.reshape(len(present), width))
+    key = rank[seg1]
+    key *= width
+    key += bins
+    key -= lo
+    counts = np.bincount(key, minlength=(len(present) + 1) * width)
+    return SparseHist(present, lo, counts.reshape(len(present) + 1, width)[:-1])
 
 
 def accumulate(parts: list[SparseHist], lo: np.ndarray, length: np.ndarray) -> list[np.ndarray]:
@@ -300,17 +321,33 @@ def upper_band(floor: np.ndarray, bz: np.ndarray, band_z: np.ndarray) -> np.ndar
     return (bz >= band_z[np.clip(floor, 0, None)]).astype(np.int64)
 
 
-def segment_histograms(tile: str, store, grid: Grid, index: BoxIndex, active: np.ndarray, axis: int,
+def segment_histograms(tile: str, store, grid: Grid, index: BoxIndex, axis_of: np.ndarray, both: np.ndarray,
                        band_z: np.ndarray) -> SparseHist:
-    """One tile's histograms along ``axis`` (0: u, 1: v) of every active box, keyed by (box, band, bin).
+    """One tile's histograms of the boxes being searched, all in ONE bincount.
 
-    Key ``2 * box + band`` where band 1 marks the storey's upper band (see :func:`upper_band`).
+    Box ``b`` is histogrammed along its axis ``axis_of[b]`` (0: u, 1: v; -1: not
+    searched) and, when ``both[b]``, along the other axis too.  Key
+    ``4 * box + 2 * which + band``: ``which`` 0 for its axis, 1 for the other;
+    ``band`` 1 for points in the storey's upper band (above door height).
     """
     bu, bv, bz = grid.tile_bins(store, tile)
-    box = index.locate(bu, bv, bz)
-    on = (box >= 0) & active[np.clip(box, 0, None)]
-    key = np.where(on, 2 * box + upper_band(index.floor_of(bz), bz, band_z), -1)
-    return keyed_histogram(key, bu if axis == 0 else bv)
+    _, box, f = index.blocks(bu, bv, bz)
+    axes = set(np.unique(axis_of[axis_of >= 0]).tolist())
+    key_of = np.append(np.where(axis_of >= 0, 4 * np.arange(len(axis_of)), -4), -4)
+    key = key_of[box]  # box -1 (none) -> the last entry
+    key += index.band_of(f, bz, band_z)
+    if axes == {0}:
+        first = bu
+    elif axes == {1}:
+        first = bv
+    else:
+        first = np.where(np.append(axis_of, 0)[box] == 1, bv, bu)
+    if not both.any():
+        return keyed_histogram(key, first)
+    sel = np.flatnonzero(np.append(both, False)[box])
+    ax = np.append(axis_of, 0)[box[sel]]
+    return keyed_histogram(np.concatenate([key, key[sel] + 2]),
+                           np.concatenate([first, np.where(ax == 1, bu[sel], bv[sel])]))
 
 
 @dataclass
@@ -338,16 +375,15 @@ def edge_histograms(tile: str, store, grid: Grid, index: BoxIndex, edges: EdgeTa
     within the window; all of them go to ONE bincount keyed by ``2 * edge + band``.
     """
     bu, bv, bz = grid.tile_bins(store, tile)
-    blk, box = index.blocks(bu, bv, bz)
-    band = upper_band(index.floor_of(bz), bz, band_z)
+    blk, box, f = index.blocks(bu, bv, bz)
     inside = np.flatnonzero(box >= 0)
-    blk, bu, bv, band = blk[inside], bu[inside], bv[inside], band[inside]
+    band = index.band_of(f[inside], bz[inside], band_z).astype(np.int64)
+    blk, bu, bv = blk[inside], bu[inside], bv[inside]
     w = edges.window
-    keys_e, keys_b = [], []
-    for side in range(4):
-        e = edges.flat[4 * blk + side]
-        off = (bu if side < 2 else bv) - edges.position[np.clip(e, 0, None)]
-        near = (e >= 0) & (off >= -w) & (off < w)
-        keys_e.append(2 * e[near] + band[near])
-        keys_b.append(off[near] + w)
-    return keyed_histogram(np.concatenate(keys_e), np.concatenate(keys_b))
+    # the four sides' edges of every point at once: (points, 4)
+    e = edges.flat[(4 * blk)[:, None] + np.arange(4)]
+    off = np.stack([bu, bu, bv, bv], axis=1)
+    off -= edges.position[np.maximum(e, 0)]
+    near = (e >= 0) & (off >= -w) & (off < w)
+    rows = np.nonzero(near)[0]
+    return keyed_histogram(2 * e[near] + band[rows], off[near] + w)

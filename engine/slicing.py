@@ -52,10 +52,11 @@ class Box:
     u1: int
     v0: int
     v1: int
-    quiet: int = 0  # consecutive axes searched without a new divider
+    quiet: int = 0  # axes searched without a new divider since the box was made
     final: bool = False
     count: int = 0
     level: int = 0
+    next_axis: int = 0  # the next axis to search (0: u, 1: v)
 
     def range(self, axis: int) -> tuple[int, int]:
         return (self.u0, self.u1) if axis == 0 else (self.v0, self.v1)
@@ -206,10 +207,16 @@ def _stretches(hist: np.ndarray, lo: int, params: DividerParams) -> list[tuple[i
 
 
 def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[Box], params: DividerParams,
-                  band_z: np.ndarray, *, client=None, max_levels: int = 8) -> tuple[list[Box], list[FoundDivider], list[dict[str, Any]]]:
-    """Recursive slicing of the storeys' boxes; returns the final cells, the dividers and per-level stats.
+                  band_z: np.ndarray, *, client=None, max_levels: int = 8
+                  ) -> tuple[list[Box], list[FoundDivider], list[dict[str, Any]]]:
+    """Recursive slicing of the storeys' boxes; returns the final cells, the dividers and per-pass stats.
 
-    ``band_z`` is the first z bin of each storey's upper band (points above door height).
+    Each box has its next axis.  A box cut along an axis gives children that
+    search the other axis next; a box searched along both axes without a new
+    divider is final.  A box not searched yet (a storey) gets the histograms of
+    both axes in the same pass, so that when its first axis has no divider the
+    second is searched at once (one pass less).  ``band_z`` is the first z bin
+    of each storey's upper band (points above door height).
     """
     boxes = list(start)
     dividers: list[FoundDivider] = []
@@ -218,51 +225,86 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
     extents = tile_extents(store, grid)
     bw = grid.bin_width
     for level in range(1, max_levels + 1):
-        axis = (level - 1) % 2
         active_ids = [i for i, b in enumerate(boxes) if not b.final]
         if not active_ids:
             break
         index = BoxIndex.build(np.array(floors), np.array([b.row() for b in boxes]))
-        active = np.array([not b.final for b in boxes], dtype=bool)
+        # per box: its axis (-1: final) and whether the other axis is wanted too (a box never searched)
+        axis_of = np.array([-1 if b.final else b.next_axis for b in boxes], dtype=np.int64)
+        both = np.array([(not b.final) and b.quiet == 0 for b in boxes], dtype=bool)
         # only the tiles that touch a box still searched
         tiles = names[tiles_touching(extents, np.array(floors), np.array([boxes[i].row() for i in active_ids]))]
         parts = run_tasks(segment_histograms, list(tiles), client=client,
-                          label=f"slicing level {level} ({AXES[axis]})", keys=list(tiles),
-                          extra_args=(store, grid, share(client, index), active, axis, band_z))
-        lo = np.array([b.range(axis)[0] for b in boxes])
-        length = np.array([b.range(axis)[1] - b.range(axis)[0] for b in boxes])
-        length[~active] = 0
-        hists = accumulate(parts, np.repeat(lo, 2), np.repeat(length, 2))  # key 2 * box + band
-        items = [(hists[2 * i] + hists[2 * i + 1], hists[2 * i + 1], int(lo[i])) for i in active_ids]
-        splits = run_tasks(_search, items, client=client, label=f"dividers level {level} ({AXES[axis]})",
-                           keys=active_ids, extra_args=(params,))
-        new: list[Box] = []
-        n_div = 0
-        for i, b in enumerate(boxes):
-            if b.final:
-                new.append(b)
-        for i, sp in zip(active_ids, splits):
+                          label=f"slicing pass {level}", keys=list(tiles),
+                          extra_args=(store, grid, share(client, index), axis_of, both, band_z))
+        # key 4 * box + 2 * (0: its axis, 1: the other) + band
+        lo = np.zeros((len(boxes), 2), dtype=np.int64)
+        length = np.zeros((len(boxes), 2), dtype=np.int64)
+        for i in active_ids:
             b = boxes[i]
-            other = (b.v0, b.v1) if axis == 0 else (b.u0, b.u1)
-            extent = [other[0] * bw, other[1] * bw]
-            for d in sp.dividers:
-                dividers.append(FoundDivider(AXES[axis], b.floor, d["position"], d["width"], d["score"], extent,
-                                             level=level, contrast=d["contrast"], void_ratio=d["void_ratio"]))
-            for a0, a1 in sp.empties:
-                dividers.append(FoundDivider(AXES[axis], b.floor, 0.5 * (a0 + a1) * bw, (a1 - a0) * bw, 0.0, extent,
-                                             kind="empty", level=level))
-            n_div += len(sp.dividers)
-            if len(sp.pieces) == 1 and not sp.dividers:
-                p0, p1, c = sp.pieces[0]
-                quiet = b.quiet + 1
-                new.append(b.with_range(axis, p0, p1, quiet=quiet, final=quiet >= 2, count=c, level=level))
+            for which, ax in enumerate((b.next_axis, 1 - b.next_axis)):
+                if which == 0 or both[i]:
+                    lo[i, which], hi = b.range(ax)
+                    length[i, which] = hi - lo[i, which]
+        hists = accumulate(parts, np.repeat(lo.ravel(), 2), np.repeat(length.ravel(), 2))
+
+        def item(i: int, which: int) -> tuple[np.ndarray, np.ndarray, int]:
+            k = 4 * i + 2 * which
+            return hists[k] + hists[k + 1], hists[k + 1], int(lo[i, which])
+
+        firsts = run_tasks(_search, [item(i, 0) for i in active_ids], client=client,
+                           label=f"dividers pass {level}", keys=active_ids, extra_args=(params,))
+        # boxes never searched whose first axis is quiet: their second axis, from the same pass
+        second_ids = [i for i, sp in zip(active_ids, firsts) if both[i] and _quiet(sp)]
+        seconds = dict(zip(second_ids, run_tasks(_search, [item(i, 1) for i in second_ids], client=client,
+                                                   label=f"dividers pass {level} (other axis)", keys=second_ids,
+                                                   extra_args=(params,))))
+        new: list[Box] = [b for b in boxes if b.final]
+        n_div = 0
+        for i, sp in zip(active_ids, firsts):
+            b = boxes[i]
+            n_div += _record(dividers, b, b.next_axis, sp, level, bw)
+            if not _quiet(sp):
+                new += [b.with_range(b.next_axis, p0, p1, quiet=1, final=False, count=c, level=level,
+                                     next_axis=1 - b.next_axis) for p0, p1, c in sp.pieces]
+                continue
+            p0, p1, c = sp.pieces[0]
+            b = b.with_range(b.next_axis, p0, p1, count=c, level=level)
+            if i not in seconds:
+                new.append(dataclasses.replace(b, quiet=b.quiet + 1, final=b.quiet + 1 >= 2,
+                                               next_axis=1 - b.next_axis))
+                continue
+            sp2 = seconds[i]
+            other = 1 - b.next_axis
+            n_div += _record(dividers, b, other, sp2, level, bw)
+            if _quiet(sp2):
+                q0, q1, c2 = sp2.pieces[0]
+                new.append(b.with_range(other, q0, q1, quiet=2, final=True, count=c2))
             else:
-                for p0, p1, c in sp.pieces:
-                    new.append(b.with_range(axis, p0, p1, quiet=1, final=False, count=c, level=level))
-        stats.append({"level": level, "axis": AXES[axis], "searched": len(active_ids), "dividers": n_div,
+                new += [b.with_range(other, q0, q1, quiet=1, final=False, count=c2, next_axis=b.next_axis)
+                        for q0, q1, c2 in sp2.pieces]
+        stats.append({"pass": level, "searched": len(active_ids) + len(second_ids), "dividers": n_div,
                       "boxes": len(new), "tiles": len(tiles)})
         boxes = new
     for b in boxes:
         b.final = True
     boxes.sort(key=lambda b: (b.floor, b.u0, b.v0))
     return boxes, dividers, stats
+
+
+def _quiet(sp: Split) -> bool:
+    """No divider and no empty run inside: the box stays whole (its ends may be trimmed)."""
+    return len(sp.pieces) == 1 and not sp.dividers
+
+
+def _record(dividers: list[FoundDivider], b: Box, axis: int, sp: Split, level: int, bw: float) -> int:
+    """Add a search's dividers (and empty runs) to the list, with their extent along the other axis."""
+    other = (b.v0, b.v1) if axis == 0 else (b.u0, b.u1)
+    extent = [other[0] * bw, other[1] * bw]
+    for d in sp.dividers:
+        dividers.append(FoundDivider(AXES[axis], b.floor, d["position"], d["width"], d["score"], extent,
+                                     level=level, contrast=d["contrast"], void_ratio=d["void_ratio"]))
+    for a0, a1 in sp.empties:
+        dividers.append(FoundDivider(AXES[axis], b.floor, 0.5 * (a0 + a1) * bw, (a1 - a0) * bw, 0.0, extent,
+                                     kind="empty", level=level))
+    return len(sp.dividers)
