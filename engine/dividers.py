@@ -4,39 +4,42 @@ A space divider (a wall, a floor slab) shows in the histogram of point
 coordinates along an axis as *two peaks with a void between them*: the two
 scanned faces and the unscanned inside.  It is found by template matching with
 a bank of peak-gap-peak filters, max-pooling over the bank, non-maximum
-suppression and a scale-free threshold.
+suppression and scale-free thresholds.
 
 The filter (paper): ``g_{δ,c}(s) = 1/(2c)·Π_{δ/2+c}(s) − 1/(2c)·Π_{δ/2}(s)`` with
 pass width ``c`` (each margin) and stop width ``δ`` (the gap).  Written as it is
 the formula is the mean density of the two margins only, which answers a lone
-strong peak (a bookcase face) as well as a wall.  We keep its two margins but
-take the *weaker* margin and subtract the gap, which makes it a true
+strong peak (a bookcase face) as well as a wall.  We keep its two margins and
+subtract the mean of the gap (a negative lobe), and the tests below make it a
 peak-gap-peak detector::
 
     L, R, G = mean density of the left margin, right margin, gap    (points per bin)
-    r_{δ,c}(s) = min(L, R) − G
+    I = room level: the lower of the median densities of room_window metres beyond each margin
+    r_{δ,c}(s) = (L + R) / 2 − G,      score = r / I   (scale-free)
 
 Responses are computed for every position and every ``(δ, c)`` with cumulative
-sums; those that pass three scale-free tests (so the same dividers come out at
-any point density) are max-pooled over ``(δ, c)`` and suppressed to the
-maxima at least ``min_spacing`` apart.  The tests:
+sums; those that pass the tests below are max-pooled over ``(δ, c)`` by their
+score and suppressed to the maxima at least ``min_spacing`` apart (non-maximum
+suppression).  All tests are ratios of densities, so the same dividers come
+out at any point density:
 
-* contrast: ``G ≤ (1 − min_contrast) · min(L, R)`` (the gap is empty next to its
-  margins) and ``min(L, R) − G ≥ min_prominence · min(I_L, I_R)`` (the margins are
-  scanned faces standing above the room level, not the edges of an unscanned hole);
-* void: ``G ≤ max_void_ratio_full · min(I_L, I_R)`` where ``I_L``, ``I_R`` are the
-  median densities of ``room_window`` metres beyond each margin.  Inside a room
-  the floor and ceiling make the histogram never drop far below the room's
-  level, so a gap much emptier than the rooms on both sides is a cut through
-  floor and ceiling: a wall, not an aisle between two bookcases nor a beam
-  (whose bottom face and the floor below fill its gap).  Door leaves, jambs
-  and thresholds fill a wall's gap below door height, so when the histogram
-  of the *upper band* (points above door height) is given, the test
-  ``G_up ≤ max_void_ratio · min(I_L_up, I_R_up)`` is made there instead, where
+* contrast: ``G ≤ (1 − min_contrast) · min(L, R)``: the gap is empty next to
+  *both* margins (a lone peak beside the room's own level fails);
+* prominence: ``max(L, R) − G ≥ min_prominence · I``: the void is bounded by a
+  scanned face standing well above the room level, not just the edge of an
+  unscanned hole (the other face may be missing: a wall seen from one side);
+* void: ``G ≤ max_void_ratio_full · I``.  Inside a room the floor and ceiling
+  make the histogram never drop far below the room's level, so a gap much
+  emptier than the rooms on both sides is a cut through floor and ceiling: a
+  wall, not an aisle between two bookcases nor a beam (whose bottom face and
+  the floor below fill its gap).  Door leaves, jambs and thresholds fill a
+  wall's gap below door height, so when the histogram of the *upper band*
+  (points above door height) is given and holds enough points beside the gap,
+  all the tests are made on it instead, with ``max_void_ratio`` (strict): there
   a wall is solid over its doors while a room's ceiling (and a beam's bottom
   face) is continuous;
 * evidence: the gap would hold at least ``min_gap_points`` points at the weaker
-  margin's density (too few points say nothing; this is a count, not a density).
+  margin's density (too few points say nothing; a count, not a density).
 
 Separately, runs of empty bins at least ``empty_run`` long are *empty voids*:
 nothing at all was scanned there, so they separate whatever lies on each side
@@ -137,7 +140,7 @@ class Divider:
     position: float  # centre of the gap
     width: float  # stop width δ of the best filter
     margin: float  # pass width c of the best filter
-    score: float  # (min(L, R) - G) / room level: how far the margins stand above the gap, in room levels
+    score: float  # ((L + R) / 2 - G) / room level: how far the margins stand above the gap, in room levels
     contrast: float  # 1 - G / min(L, R)
     void_ratio: float  # G / min(I_L, I_R)
     cut: int  # bin edge (index into the histogram) where the axis is cut
