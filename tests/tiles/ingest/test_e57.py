@@ -78,3 +78,21 @@ def test_missing_pye57_gives_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_pye57)
     with pytest.raises(UserError, match=r"pip install 'buildingparser\[e57\]'"):
         ingest([str(path)], str(tmp_path / "s.zarr"))
+
+
+def test_e57_store_exports_its_scan_dimensions(tmp_path):
+    import laspy
+
+    from tiles.export import export
+
+    _write_e57(tmp_path / "a.e57", seed=1)
+    with pytest.warns(UserWarning):
+        s = ingest([str(tmp_path / "a.e57")], str(tmp_path / "s.zarr"))
+    export(s, str(tmp_path / "a.laz"))
+    out = laspy.read(str(tmp_path / "a.laz"))
+    got = gather_points(s)
+    assert out.point_format.id == 7
+    for name in ("scan_index", "row_index", "column_index"):
+        np.testing.assert_array_equal(out.points.array[name], got[name])
+    np.testing.assert_array_equal(np.asarray(out.intensity), got["intensity"])
+    np.testing.assert_array_equal(np.asarray(out.red) // 257, got["red"])
