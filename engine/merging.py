@@ -177,73 +177,75 @@ class Components:
 
 
 def merge(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRules | None = None) -> Components:
-    """Connected components of the edges without a divider, then absorption of weak groups."""
+    """Connected components of the edges without a divider, then absorption of weak groups (smallest first)."""
     r = rules or MergeRules()
     n = len(cells)
-    keep = [e for e in edges if e.divider is None]
-    rows = np.array([e.a for e in keep], dtype=np.int64)
-    cols = np.array([e.b for e in keep], dtype=np.int64)
-    graph = coo_array((np.ones(len(keep)), (rows, cols)), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
-    parent = list(range(int(labels.max()) + 1 if n else 0))
+    if n == 0:
+        return Components(np.zeros(0, dtype=np.int64))
+    ea = np.array([e.a for e in edges], dtype=np.int64)
+    eb = np.array([e.b for e in edges], dtype=np.int64)
+    elen = np.array([e.length_bins for e in edges], dtype=np.float64)
+    ediv = np.array([e.divider is not None for e in edges], dtype=bool)
+    graph = coo_array((np.ones(int((~ediv).sum())), (ea[~ediv], eb[~ediv])), shape=(n, n))
+    k_comps, labels = connected_components(graph, directed=False)
+    parent = np.arange(k_comps)
+    dropped = np.zeros(k_comps, dtype=bool)
 
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
+    def roots() -> np.ndarray:
+        p = parent
+        while True:
+            q = p[p]
+            if np.array_equal(q, p):
+                return p
+            p = q
 
     area = np.array([(c.u1 - c.u0) * (c.v1 - c.v0) * bin_width ** 2 for c in cells])
     count = np.array([c.count for c in cells], dtype=np.float64)
-    cu0, cu1 = np.array([c.u0 for c in cells], np.int64), np.array([c.u1 for c in cells], np.int64)
-    cv0, cv1 = np.array([c.v0 for c in cells], np.int64), np.array([c.v1 for c in cells], np.int64)
+    bounds = np.array([[c.u0, c.u1, c.v0, c.v1] for c in cells], dtype=np.int64)
     absorbed: list[tuple[int, int]] = []
-    dropped: list[int] = []
-    for _ in range(len(parent) + 1):
-        comp = np.array([find(int(x)) for x in labels], dtype=np.int64) if n else np.zeros(0, np.int64)
-        ids = np.unique(comp)
-        c_area = np.bincount(comp, weights=area, minlength=len(parent))
-        c_count = np.bincount(comp, weights=count, minlength=len(parent))
+    big = np.iinfo(np.int64).max
+    for _ in range(k_comps + 1):
+        comp = roots()[labels]
+        c_area = np.bincount(comp, weights=area, minlength=k_comps)
+        c_count = np.bincount(comp, weights=count, minlength=k_comps)
+        live = np.zeros(k_comps, dtype=bool)
+        live[comp] = True
+        live &= ~dropped
         dens = np.where(c_area > 0, c_count / np.maximum(c_area, 1e-12), 0.0)
-        live = [int(k) for k in ids if k not in dropped]
-        med = float(np.median(dens[live])) if live else 0.0
-        big = np.iinfo(np.int64).max
-        lo_u = np.full(len(parent), big)
-        lo_v = np.full(len(parent), big)
-        hi_u = np.full(len(parent), -big)
-        hi_v = np.full(len(parent), -big)
-        np.minimum.at(lo_u, comp, cu0)
-        np.minimum.at(lo_v, comp, cv0)
-        np.maximum.at(hi_u, comp, cu1)
-        np.maximum.at(hi_v, comp, cv1)
-        weak = []
-        for k in live:
-            width = min(hi_u[k] - lo_u[k], hi_v[k] - lo_v[k]) * bin_width
-            if (c_area[k] < r.min_space_area or width < r.min_space_width or c_count[k] == 0
-                    or dens[k] < r.min_relative_density * med):
-                weak.append((c_area[k], k))
-        if not weak:
+        med = float(np.median(dens[live])) if live.any() else 0.0
+        lo_u, lo_v = np.full(k_comps, big), np.full(k_comps, big)
+        hi_u, hi_v = np.full(k_comps, -big), np.full(k_comps, -big)
+        np.minimum.at(lo_u, comp, bounds[:, 0])
+        np.maximum.at(hi_u, comp, bounds[:, 1])
+        np.minimum.at(lo_v, comp, bounds[:, 2])
+        np.maximum.at(hi_v, comp, bounds[:, 3])
+        width = np.minimum(hi_u - lo_u, hi_v - lo_v) * bin_width
+        weak = live & ((c_area < r.min_space_area) | (width < r.min_space_width) | (c_count == 0)
+                       | (dens < r.min_relative_density * med))
+        if not weak.any():
             break
-        weak.sort()
-        _, k = weak[0]
-        faces: dict[int, list[float]] = defaultdict(lambda: [0.0, 0.0])  # other -> [free length, divided length]
-        for e in edges:
-            ca, cb = comp[e.a], comp[e.b]
-            if (ca == k) == (cb == k):
-                continue
-            other = int(cb if ca == k else ca)
-            if other in dropped:
-                continue
-            faces[other][0 if e.divider is None else 1] += e.length_bins
-        if faces:
-            into = max(faces, key=lambda o: (faces[o][0], faces[o][1], -o))
-            parent[k] = into
-            absorbed.append((int(k), int(into)))
-        else:
-            dropped.append(int(k))
-    comp = np.array([find(int(x)) for x in labels], dtype=np.int64) if n else np.zeros(0, np.int64)
+        cand = np.flatnonzero(weak)
+        k = int(cand[np.lexsort((cand, c_area[cand]))[0]])  # the smallest weak group
+        ca, cb = comp[ea], comp[eb]
+        touch = (ca == k) != (cb == k)
+        other = np.where(ca == k, cb, ca)[touch]
+        ok = ~dropped[other]
+        other, length, div = other[ok], elen[touch][ok], ediv[touch][ok]
+        if len(other) == 0:
+            dropped[k] = True  # noise beyond the building: no neighbour to join
+            continue
+        free = np.bincount(other, weights=length * ~div, minlength=k_comps)
+        divided = np.bincount(other, weights=length * div, minlength=k_comps)
+        opts = np.unique(other)
+        into = int(opts[np.lexsort((opts, -divided[opts], -free[opts]))[0]])
+        parent[k] = into
+        absorbed.append((k, into))
+    comp = roots()[labels]
     out = np.full(n, -1, dtype=np.int64)
-    live = [k for k in np.unique(comp) if k not in dropped]
-    for new, k in enumerate(sorted(live, key=lambda k: int(np.flatnonzero(comp == k)[0]))):
-        out[comp == k] = new
-    return Components(out, absorbed, dropped)
+    keep = ~dropped[comp]
+    ids, first = np.unique(comp[keep], return_index=True)
+    order = ids[np.argsort(np.flatnonzero(keep)[first], kind="stable")]  # numbered by their first cell
+    new = np.full(k_comps, -1, dtype=np.int64)
+    new[order] = np.arange(len(order))
+    out[keep] = new[comp[keep]]
+    return Components(out, absorbed, [int(k) for k in np.flatnonzero(dropped)])

@@ -412,12 +412,19 @@ def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]]
                           int(labels[i])))
         floor_list[b.floor].point_count += int(cell_counts[i])
     faces = _faces(frame, boxes, edges, labels, floor_list, bw)
+    nb_of: dict[int, list[int]] = defaultdict(list)
+    for a, o in sorted(faces):
+        nb_of[a].append(o)
+    members_of: dict[int, list[int]] = defaultdict(list)
+    for i, lab in enumerate(labels.tolist()):
+        if lab >= 0:
+            members_of[lab].append(i)
     spaces = []
     for s in range(n_spaces):
-        members = [i for i in range(len(boxes)) if labels[i] == s]
+        members = members_of[s]
         rects = [cells[i].box for i in members]
         fp, area = union_footprint(rects, frame)
-        nbs = [Neighbour(o, faces[(s, o)]) for o in sorted({o for (a, o) in faces if a == s})]
+        nbs = [Neighbour(o, faces[(s, o)]) for o in nb_of.get(s, [])]
         zr = [float(zmin[s]), float(zmax[s])] if np.isfinite(zmin[s]) else list(floor_list[boxes[members[0]].floor].z_range)
         spaces.append(Space(s, boxes[members[0]].floor, members, fp, area, zr, int(space_counts[s]),
                             touched.get(s, []), nbs))
