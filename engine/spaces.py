@@ -1,15 +1,18 @@
 """Space parsing of a whole building (paper section 3): the stage that turns a tile store into spaces.
 
 Steps, each a batch of dask tasks over the tiles (nothing loads the building
-into one process):
+into one process; the driver only sums small per-tile results):
 
-1. one pass: per-tile orientation evidence (:mod:`engine.alignment`) and the z histogram;
-2. one pass: refinement of the yaw -> the aligned frame;
-3. storeys from the z histogram (:func:`engine.slicing.find_storeys`);
-4. recursive slicing along u, v, u, ... (:mod:`engine.slicing`), one pass per level;
-5. merging (:mod:`engine.merging`): one pass for all shared faces, one task per face;
-6. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile and
-   collecting per-space counts, z ranges and tiles.
+1. one pass: per-tile orientation evidence (:mod:`engine.alignment`) and the
+   z histogram; small tasks refine the yaw from the evidence -> the aligned frame;
+2. storeys from the z histogram (:func:`engine.slicing.find_storeys`);
+3. recursive slicing along u and v (:mod:`engine.slicing`): one pass per round,
+   one task per box searched; the upper band above ``upper_band`` metres over
+   each storey's floor gets its own histograms;
+4. merging (:mod:`engine.merging`): one pass for all shared faces, one task per
+   face, then components and absorption of weak groups;
+5. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile
+   and collecting per-space counts, z ranges and tiles.
 
 The document ``meta/spaces`` (:meth:`SpaceParse.to_doc`), which later stages
 rely on::
@@ -30,7 +33,8 @@ rely on::
                                  "segment": [[x0, y0], [x1, y1]] (world), "divider": bool,
                                  "divider_kind", "score"}]}]}],
      "unassigned_points", "point_count",
-     "stats": {"levels": [...], "cells", "edges", "edges_divided", "seconds": {...}},
+     "stats": {"passes": [{"pass", "searched", "dividers", "boxes", "tiles"}], "cells", "edges",
+               "edges_divided", "absorbed", "dropped", "seconds": {step: seconds}},
      "params": {...}}
 
 A face is a piece of a shared face between two cells of the two spaces, along
@@ -354,7 +358,7 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
     ground = floor_levels(z_hist, z_lo, floors, p.z_bin)
     band_z = np.array([g + int(round(p.upper_band / p.z_bin)) for g in ground], dtype=np.int64)
     start = _initial_boxes(store, grid, floors)
-    cells, walls, levels = slice_storeys(store, grid, floors, start, p.slicing_walls, band_z, client=client,
+    cells, walls, passes = slice_storeys(store, grid, floors, start, p.slicing_walls, band_z, client=client,
                                          max_levels=p.max_levels)
     seconds["slicing"] = time.perf_counter() - t
 
@@ -381,7 +385,7 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
 
     parse = _assemble(store, p, frame, floors, slabs + walls, cells, edges, comps.labels, labelled, tiles,
                       n_spaces)
-    parse.stats = {"levels": levels, "cells": len(cells), "edges": len(edges),
+    parse.stats = {"passes": passes, "cells": len(cells), "edges": len(edges),
                    "edges_divided": int(sum(e.divider is not None for e in edges)),
                    "absorbed": len(comps.absorbed), "dropped": len(comps.dropped),
                    "seconds": {k: round(v, 3) for k, v in seconds.items()}}
