@@ -17,7 +17,7 @@ def client():
     """A 2-worker LocalCluster shared by the tests that need dask."""
     from distributed import Client, LocalCluster
 
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR, memory_limit="4GiB")
     c = Client(cluster)
     yield c

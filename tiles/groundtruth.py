@@ -64,9 +64,11 @@ class GTElement:
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> "GTElement":
+        """Read an element record; keys beyond the contract (e.g. the generator's ``annotation``) are ignored."""
         d = dict(d)
         d["class_"] = d.pop("class")
-        return cls(**d)
+        known = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in known})
 
 
 def make_doc(spaces: list[GTSpace], elements: list[GTElement]) -> dict[str, Any]:
