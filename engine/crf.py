@@ -656,3 +656,8 @@ def apply_crf(proposals: list[Proposal], weights: CRFWeights, client=None, *,
               "status": dict(sorted(Counter(i["status"] for i in infos).items())),
               "proposals": len(proposals), "kept": int(keep.sum()), "per_space": infos}
     return [p for p, k in zip(proposals, keep) if k], report
+
+
+def metrics_block(report: dict[str, Any]) -> dict[str, Any]:
+    """The ``crf`` block of ``metrics.json`` from an :func:`apply_crf` report (without the per-space details)."""
+    return {k: report[k] for k in ("spaces", "solve_seconds", "status", "proposals", "kept") if k in report}

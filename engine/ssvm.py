@@ -114,6 +114,25 @@ def _predict(example: tuple[list[Proposal], np.ndarray], weights: CRFWeights, se
     return {"errors": int(np.sum(y != ystar)), "nodes": len(y), "status": info["status"]}
 
 
+def group_by_space(proposals: Sequence[Proposal], ground_truth: Sequence[dict[str, Any]]
+                   ) -> tuple[list[list[Proposal]], list[list[dict[str, Any]]]]:
+    """Proposals detected on the ground-truth spaces of one building, with those spaces' ground-truth elements.
+
+    ``proposals`` come from ``engine.detection.detect(store, space_array="gt_space")`` (their
+    ``space_id`` is the ground-truth space), ``ground_truth`` is the ``elements`` list of the store's
+    ``meta/ground_truth`` (each with its ``space``).  Returns the two lists :func:`train_crf` takes,
+    one entry per space that has proposals, in space order.
+    """
+    props: dict[int, list[Proposal]] = {}
+    for p in proposals:
+        props.setdefault(int(p.space_id), []).append(p)
+    gts: dict[int, list[dict[str, Any]]] = {}
+    for g in ground_truth:
+        gts.setdefault(int(g.get("space", -1)), []).append(g)
+    sids = sorted(props)
+    return [props[s] for s in sids], [gts.get(s, []) for s in sids]
+
+
 def _label_task(job: tuple[list[Proposal], list[dict[str, Any]]], iou: float) -> np.ndarray:
     return proposal_labels(job[0], job[1], iou)
 

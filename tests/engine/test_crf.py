@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from engine.crf import (CLASS_PAIRS, CRFSettings, CRFWeights, apply_crf, build_graph, edge_feature_size,
-                        edge_scale, energies, energy, joint_feature, pair_index, select_elements, solve_ip)
+                        edge_scale, energies, energy, joint_feature, metrics_block, pair_index, select_elements,
+                        solve_ip)
 from engine.crf_scenes import make_scenes
 from engine.proposals import Proposal
 from tiles.classes import CLASS_CODES
@@ -258,3 +259,5 @@ def test_apply_crf_on_the_cluster_equals_space_by_space(client):
     assert sum(report["status"].values()) == 4
     assert 0 < report["solve_seconds"]["median"] <= report["solve_seconds"]["max"]
     assert 0 < len(kept) < len(flat)
+    block = metrics_block(report)
+    assert set(block) == {"spaces", "solve_seconds", "status", "proposals", "kept"} and block["kept"] == len(kept)

@@ -9,7 +9,8 @@ import pytest
 from engine.crf import CRFSettings, CRFWeights, build_graph, energies, energy, joint_feature
 from engine.crf_scenes import make_scenes
 from engine.proposals import Proposal
-from engine.ssvm import _oracle, fit_ssvm, hamming_loss, proposal_labels, solve_working_set, train_crf
+from engine.ssvm import (_oracle, fit_ssvm, group_by_space, hamming_loss, proposal_labels, solve_working_set,
+                         train_crf)
 from tiles.classes import CLASS_CODES
 
 K = 2
@@ -115,3 +116,12 @@ def test_training_arguments_are_checked():
     # joint features of the empty labelling are zero: the untrained weights' energy is 0 there
     g = build_graph(examples[0][0], np.full(12, 2), K)
     assert not joint_feature(g, np.zeros(g.n, bool)).any()
+
+
+def test_group_by_space_pairs_proposals_with_their_spaces_ground_truth():
+    a, b, c = (world_prop(WALL, [1, 5, 1.5], [0.2, 8, 3], s) for s in (0.1, 0.2, 0.3))
+    a.space_id, b.space_id, c.space_id = 3, 1, 3
+    truth = [dict(gt(WALL, [1, 5, 1.5], [0.2, 8, 3]), space=s) for s in (1, 3, 5, 3)]
+    props, gts = group_by_space([a, b, c], truth)
+    assert props == [[b], [a, c]]
+    assert [len(g) for g in gts] == [1, 2] and all(x["space"] == 1 for x in gts[0])
