@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.alignment import Frame
+from tiles.tasks import run_tasks
 
 
 @dataclass(frozen=True)
@@ -291,12 +292,15 @@ def keyed_histogram(segment: np.ndarray, bins: np.ndarray) -> SparseHist:
     return SparseHist(present, lo, counts.reshape(len(present) + 1, width)[:-1])
 
 
-def accumulate(parts: list[SparseHist], lo: np.ndarray, length: np.ndarray) -> list[np.ndarray]:
+def accumulate(parts: list[SparseHist], lo: np.ndarray, length: np.ndarray,
+               out: list[np.ndarray] | None = None) -> list[np.ndarray]:
     """Sum tile blocks into one histogram per segment: segment ``s`` covers bins ``[lo[s], lo[s] + length[s])``.
 
-    Counts outside a segment's range (there should be none) are dropped.
+    Adds into ``out`` when given (a running sum over batches of tiles).  Counts
+    outside a segment's range (there should be none) are dropped.
     """
-    out = [np.zeros(int(n), dtype=np.int64) for n in length]
+    if out is None:
+        out = [np.zeros(int(n), dtype=np.int64) for n in length]
     for part in parts:
         for k, s in enumerate(part.segments):
             a = part.lo - int(lo[s])
@@ -304,6 +308,24 @@ def accumulate(parts: list[SparseHist], lo: np.ndarray, length: np.ndarray) -> l
             i0, i1 = max(a, 0), min(a + len(row), len(out[s]))
             if i1 > i0:
                 out[s][i0:i1] += row[i0 - a:i1 - a]
+    return out
+
+
+def histogram_pass(fn, tiles: list[str], lo: np.ndarray, length: np.ndarray, *, client=None, label: str,
+                   extra_args: tuple = ()) -> list[np.ndarray]:
+    """Run a per-tile histogram task over the tiles and sum the blocks, batch by batch.
+
+    The driver holds one batch of tile results at a time (``buildingparser.spaces.batch-tiles``
+    tiles), so its memory does not grow with the building.
+    """
+    import dask.config
+
+    batch = max(1, int(dask.config.get("buildingparser.spaces.batch-tiles", 256) or 256))
+    out = [np.zeros(int(n), dtype=np.int64) for n in length]
+    for start in range(0, len(tiles), batch):
+        part_tiles = list(tiles[start:start + batch])
+        parts = run_tasks(fn, part_tiles, client=client, label=label, keys=part_tiles, extra_args=extra_args)
+        accumulate(parts, lo, length, out)
     return out
 
 

@@ -34,7 +34,7 @@ from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
 from engine.dividers import DividerParams, detect_dividers, empty_runs
-from engine.histograms import BoxIndex, EdgeTables, Grid, accumulate, edge_histograms, share
+from engine.histograms import BoxIndex, EdgeTables, Grid, edge_histograms, histogram_pass, share
 from engine.slicing import Box
 from tiles.tasks import run_tasks
 
@@ -143,9 +143,9 @@ def test_edges(store, grid: Grid, floors: np.ndarray, cells: list[Box], edges: l
     index = BoxIndex.build(floors, np.array([c.row() for c in cells]))
     tables = build_edge_tables(index, cells, edges, window)
     tiles = [t.name for t in store.tiles]
-    parts = run_tasks(edge_histograms, tiles, client=client, label="merging: face histograms", keys=tiles,
-                      extra_args=(store, grid, share(client, index), share(client, tables), band_z))
-    hists = accumulate(parts, np.zeros(2 * len(edges), dtype=np.int64), np.full(2 * len(edges), 2 * window))
+    hists = histogram_pass(edge_histograms, tiles, np.zeros(2 * len(edges), dtype=np.int64),
+                           np.full(2 * len(edges), 2 * window), client=client, label="merging: face histograms",
+                           extra_args=(store, grid, share(client, index), share(client, tables), band_z))
     items = []
     for k, e in enumerate(edges):
         lo_a = cells[e.a].range(e.axis)[0]

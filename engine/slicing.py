@@ -37,7 +37,8 @@ from typing import Any
 import numpy as np
 
 from engine.dividers import DividerParams, detect_dividers, empty_runs
-from engine.histograms import BoxIndex, Grid, accumulate, segment_histograms, share, tile_extents, tiles_touching
+from engine.histograms import (BoxIndex, Grid, histogram_pass, segment_histograms, share, tile_extents,
+                               tiles_touching)
 from tiles.tasks import run_tasks
 
 AXES = ("u", "v", "z")
@@ -234,9 +235,7 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
         both = np.array([(not b.final) and b.quiet == 0 for b in boxes], dtype=bool)
         # only the tiles that touch a box still searched
         tiles = names[tiles_touching(extents, np.array(floors), np.array([boxes[i].row() for i in active_ids]))]
-        parts = run_tasks(segment_histograms, list(tiles), client=client,
-                          label=f"slicing pass {level}", keys=list(tiles),
-                          extra_args=(store, grid, share(client, index), axis_of, both, band_z))
+
         # key 4 * box + 2 * (0: its axis, 1: the other) + band
         lo = np.zeros((len(boxes), 2), dtype=np.int64)
         length = np.zeros((len(boxes), 2), dtype=np.int64)
@@ -246,7 +245,9 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
                 if which == 0 or both[i]:
                     lo[i, which], hi = b.range(ax)
                     length[i, which] = hi - lo[i, which]
-        hists = accumulate(parts, np.repeat(lo.ravel(), 2), np.repeat(length.ravel(), 2))
+        hists = histogram_pass(segment_histograms, list(tiles), np.repeat(lo.ravel(), 2),
+                               np.repeat(length.ravel(), 2), client=client, label=f"slicing pass {level}",
+                               extra_args=(store, grid, share(client, index), axis_of, both, band_z))
 
         def item(i: int, which: int) -> tuple[np.ndarray, np.ndarray, int]:
             k = 4 * i + 2 * which

@@ -272,29 +272,25 @@ def _first_pass(tile: str, store, params: AlignmentParams, grid: Grid, z_lo: int
     return {"evidence": tile_evidence(xy, params), "z": z_histogram(bz, z_lo, z_n)}
 
 
-def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.ndarray, n_cells: int,
-                n_spaces: int) -> dict[str, Any]:
-    """Write ``cell_id`` and ``space_id`` of one tile; per-space counts and z ranges."""
+def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.ndarray) -> dict[str, Any]:
+    """Write ``cell_id`` and ``space_id`` of one tile; its cells' and spaces' point counts and z ranges (sparse)."""
     m = store.meta
     raw = store.read(tile, ("x", "y", "z"))
     bu, bv, bz = grid.raw_bins(raw, grid.raw_affine(m))
     cell = index.locate(bu, bv, bz)
-    space = np.where(cell >= 0, cell_space[np.clip(cell, 0, None)], -1)
+    space = np.append(cell_space, -1)[cell]  # cell -1 -> space -1
     store.write_array(tile, "cell_id", cell.astype(np.int32))
     store.write_array(tile, "space_id", space.astype(np.int32))
-    s = space >= 0
-    # z range per space from the raw integers (monotonic in z)
-    zmin = np.full(n_spaces, np.iinfo(np.int64).max)
-    zmax = np.full(n_spaces, np.iinfo(np.int64).min)
-    zr = raw["z"].astype(np.int64)
-    np.minimum.at(zmin, space[s], zr[s])
-    np.maximum.at(zmax, space[s], zr[s])
-    present = np.bincount(space[s], minlength=n_spaces) > 0
-    to_world = lambda v: np.where(present, v * m.scale[2] + m.offset[2], np.nan)  # noqa: E731
-    return {"space_counts": np.bincount(space[s], minlength=n_spaces),
-            "cell_counts": np.bincount(cell[cell >= 0], minlength=n_cells),
-            "zmin": np.where(present, to_world(zmin), np.inf), "zmax": np.where(present, to_world(zmax), -np.inf),
-            "unassigned": int((~s).sum())}
+    inside = cell >= 0
+    cells, counts = np.unique(cell[inside], return_counts=True)
+    # z range per cell from the raw integers (monotonic in z); the driver reduces them per space
+    order = np.argsort(cell[inside], kind="stable")
+    zs = raw["z"][inside][order]
+    starts = np.r_[0, np.cumsum(counts)[:-1]].astype(np.int64)
+    zmin = np.minimum.reduceat(zs, starts) if len(zs) else np.zeros(0)
+    zmax = np.maximum.reduceat(zs, starts) if len(zs) else np.zeros(0)
+    return {"cells": cells, "counts": counts, "zmin": zmin * m.scale[2] + m.offset[2],
+            "zmax": zmax * m.scale[2] + m.offset[2], "unassigned": int((space < 0).sum())}
 
 
 # -- the stage ---------------------------------------------------------------------------------------------
@@ -335,14 +331,17 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
     z_lo = int(math.floor((meta.bounds[2] - origin[2]) / p.z_bin)) - 1
     z_n = int(math.floor((meta.bounds[5] - origin[2]) / p.z_bin)) + 2 - z_lo
     zgrid = Grid.for_store(store, Frame(0.0, origin), p.bin_width, p.z_bin)  # z bins do not depend on the yaw
+    # the wall-pixel samples kept for the yaw refinement: at most 2 M over the whole building
+    al = dataclasses.replace(p.alignment, max_wall_pixels=max(
+        500, min(p.alignment.max_wall_pixels, 2_000_000 // max(len(tiles), 1))))
     first = run_tasks(_first_pass, tiles, client=client, label="spaces: evidence + z histogram", keys=tiles,
-                      extra_args=(store, p.alignment, zgrid, z_lo, z_n))
+                      extra_args=(store, al, zgrid, z_lo, z_n))
     z_hist = np.sum([r["z"] for r in first], axis=0)
     seconds["first_pass"] = time.perf_counter() - t0
 
     t = time.perf_counter()
     if p.yaw is None:
-        alignment = estimate_alignment(store, client=client, params=p.alignment,
+        alignment = estimate_alignment(store, client=client, params=al,
                                        evidence=[r["evidence"] for r in first])
         frame = alignment.frame
         store.set_doc("alignment", _jsonable(alignment.to_doc()))
@@ -379,8 +378,7 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
                   {"name": "space_id", "type": "int32", "description": "space id"}),
     ])
     labelled = run_tasks(_label_tile, tiles, client=client, label="spaces: writing labels", keys=tiles,
-                         extra_args=(store, grid, share(client, index), comps.labels.astype(np.int64), len(cells),
-                                     n_spaces))
+                         extra_args=(store, grid, share(client, index), comps.labels.astype(np.int64)))
     seconds["labelling"] = time.perf_counter() - t
 
     parse = _assemble(store, p, frame, floors, slabs + walls, cells, edges, comps.labels, labelled, tiles,
@@ -401,13 +399,18 @@ def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]]
 
     bw, zb = p.bin_width, p.z_bin
     oz = frame.origin[2]
-    space_counts = np.sum([r["space_counts"] for r in labelled], axis=0) if labelled else np.zeros(n_spaces)
-    cell_counts = np.sum([r["cell_counts"] for r in labelled], axis=0) if labelled else np.zeros(len(boxes))
-    zmin = np.min([r["zmin"] for r in labelled], axis=0) if labelled else np.zeros(n_spaces)
-    zmax = np.max([r["zmax"] for r in labelled], axis=0) if labelled else np.zeros(n_spaces)
+    cell_counts = np.zeros(len(boxes), dtype=np.int64)
+    space_counts = np.zeros(n_spaces, dtype=np.int64)
+    zmin, zmax = np.full(n_spaces, np.inf), np.full(n_spaces, -np.inf)
     touched: dict[int, list[str]] = defaultdict(list)
     for name, r in zip(tiles, labelled):
-        for s in np.flatnonzero(r["space_counts"]):
+        np.add.at(cell_counts, r["cells"], r["counts"])
+        sp = labels[r["cells"]]
+        ok = sp >= 0
+        np.add.at(space_counts, sp[ok], r["counts"][ok])
+        np.minimum.at(zmin, sp[ok], r["zmin"][ok])
+        np.maximum.at(zmax, sp[ok], r["zmax"][ok])
+        for s in np.unique(sp[ok]):
             touched[int(s)].append(name)
     floor_list = [Floor(i, [oz + a * zb, oz + b * zb], 0) for i, (a, b) in enumerate(floors)]
     cells = []
