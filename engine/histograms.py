@@ -96,6 +96,11 @@ class Grid:
         return t.astype(np.int64)
 
 
+def tiles_by_size(store) -> list[str]:
+    """Tile names, largest first: submitted in that order, a pass ends with small tasks (better balance)."""
+    return [t.name for t in sorted(store.tiles, key=lambda t: (-t.count, t.name))]
+
+
 def tile_extents(store, grid: Grid) -> np.ndarray:
     """Per tile ``[u0, u1, v0, v1, z0, z1]`` in bins, a conservative bound from its world bounds."""
     o = np.asarray(store.meta.origin)

@@ -34,7 +34,7 @@ from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
 from engine.dividers import DividerParams, detect_dividers, empty_runs
-from engine.histograms import BoxIndex, EdgeTables, Grid, edge_histograms, histogram_pass, share
+from engine.histograms import BoxIndex, EdgeTables, Grid, edge_histograms, histogram_pass, share, tiles_by_size
 from engine.slicing import Box
 from tiles.tasks import run_tasks
 
@@ -142,7 +142,7 @@ def test_edges(store, grid: Grid, floors: np.ndarray, cells: list[Box], edges: l
     window = params.bins(window_m)
     index = BoxIndex.build(floors, np.array([c.row() for c in cells]))
     tables = build_edge_tables(index, cells, edges, window)
-    tiles = [t.name for t in store.tiles]
+    tiles = tiles_by_size(store)
     hists = histogram_pass(edge_histograms, tiles, np.zeros(2 * len(edges), dtype=np.int64),
                            np.full(2 * len(edges), 2 * window), client=client, label="merging: face histograms",
                            extra_args=(store, grid, share(client, index), share(client, tables), band_z))

@@ -222,8 +222,9 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
     boxes = list(start)
     dividers: list[FoundDivider] = []
     stats: list[dict[str, Any]] = []
-    names = np.array([t.name for t in store.tiles])
-    extents = tile_extents(store, grid)
+    order = np.argsort([-t.count for t in store.tiles], kind="stable")  # largest tiles first
+    names = np.array([t.name for t in store.tiles])[order]
+    extents = tile_extents(store, grid)[order]
     bw = grid.bin_width
     for level in range(1, max_levels + 1):
         active_ids = [i for i, b in enumerate(boxes) if not b.final]

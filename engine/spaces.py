@@ -60,7 +60,7 @@ import numpy as np
 from engine import config  # noqa: F401  (registers the defaults)
 from engine.alignment import AlignmentParams, Frame, estimate_alignment, tile_evidence
 from engine.dividers import DividerParams, vertical_params
-from engine.histograms import BoxIndex, Grid, share, z_histogram
+from engine.histograms import BoxIndex, Grid, share, tiles_by_size, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
 from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
 from tiles.schema import Dimension
@@ -90,7 +90,7 @@ class SpaceParams:
     slicing_void_ratio_full: float = 0.85
     min_storey_height: float = 2.0
     upper_band: float = 2.2  # m above a storey's floor: doors end below, walls are solid above
-    merge_window: float = 2.0
+    merge_window: float = 1.6
     min_face: float = 0.3
     min_space_area: float = 1.0
     min_space_width: float = 0.5
@@ -282,13 +282,16 @@ def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.nd
     store.write_array(tile, "cell_id", cell.astype(np.int32))
     store.write_array(tile, "space_id", space.astype(np.int32))
     inside = cell >= 0
-    cells, counts = np.unique(cell[inside], return_counts=True)
+    per = np.bincount(cell[inside], minlength=len(cell_space))
+    cells = np.flatnonzero(per)
+    counts = per[cells]
     # z range per cell from the raw integers (monotonic in z); the driver reduces them per space
-    order = np.argsort(cell[inside], kind="stable")
-    zs = raw["z"][inside][order]
-    starts = np.r_[0, np.cumsum(counts)[:-1]].astype(np.int64)
-    zmin = np.minimum.reduceat(zs, starts) if len(zs) else np.zeros(0)
-    zmax = np.maximum.reduceat(zs, starts) if len(zs) else np.zeros(0)
+    big = np.iinfo(np.int64).max
+    zmin_all, zmax_all = np.full(len(cell_space), big), np.full(len(cell_space), -big)
+    zr = raw["z"][inside].astype(np.int64)
+    np.minimum.at(zmin_all, cell[inside], zr)
+    np.maximum.at(zmax_all, cell[inside], zr)
+    zmin, zmax = zmin_all[cells], zmax_all[cells]
     return {"cells": cells, "counts": counts, "zmin": zmin * m.scale[2] + m.offset[2],
             "zmax": zmax * m.scale[2] + m.offset[2], "unassigned": int((space < 0).sum())}
 
@@ -325,7 +328,7 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
     p = params or SpaceParams.from_config()
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    tiles = [t.name for t in store.tiles]
+    tiles = tiles_by_size(store)  # largest first (better balance); results kept in this order
     meta = store.meta
     origin = tuple(float(v) for v in meta.origin)
     z_lo = int(math.floor((meta.bounds[2] - origin[2]) / p.z_bin)) - 1
@@ -341,8 +344,9 @@ def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "S
 
     t = time.perf_counter()
     if p.yaw is None:
+        by_name = dict(zip(tiles, first))
         alignment = estimate_alignment(store, client=client, params=al,
-                                       evidence=[r["evidence"] for r in first])
+                                       evidence=[by_name[t.name]["evidence"] for t in store.tiles])
         frame = alignment.frame
         store.set_doc("alignment", _jsonable(alignment.to_doc()))
     else:
