@@ -11,13 +11,17 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import dask.config
 import numpy as np
 
 from engine.spaces import SpaceParse
+from tiles.store import TileStore
 from tiles.tasks import run_tasks
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 
 def plan_pixel(extent: float, min_pixel: float | None = None, max_pixels: int | None = None) -> float:
@@ -50,7 +54,8 @@ def _tile_raster(tile: str, store, lo: tuple[float, float], pixel: float, shape:
     return {"key": p[first], "label": lab[first], "count": counts[first]}
 
 
-def floorplan_raster(store, parse: SpaceParse, *, client=None, pixel: float | None = None
+def floorplan_raster(store: TileStore, parse: SpaceParse, *, client: Client | None = None,
+                     pixel: float | None = None
                      ) -> tuple[np.ndarray, tuple[float, float], float]:
     """Label raster ``(floors, rows, cols)`` (-2 empty, -1 unassigned, else space id), its corner and pixel."""
     b = store.meta.bounds
@@ -82,7 +87,7 @@ def _colours(n: int) -> np.ndarray:
     return base[np.arange(n) % len(base)]
 
 
-def draw_floorplan(store, parse: SpaceParse, path: str | os.PathLike, client=None, *,
+def draw_floorplan(store: TileStore, parse: SpaceParse, path: str | os.PathLike, client: Client | None = None, *,
                    draw_dividers: bool = True, dpi: int = 150) -> str:
     """Draw the floor plan (spaces coloured, dividers drawn, ids written) to a PNG; returns the path."""
     import matplotlib

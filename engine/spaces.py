@@ -52,7 +52,7 @@ import math
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import dask.config
 import numpy as np
@@ -64,7 +64,11 @@ from engine.histograms import BoxIndex, Grid, share, tiles_by_size, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
 from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
 from tiles.schema import Dimension
+from tiles.store import TileStore
 from tiles.tasks import run_tasks
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 DOC = "spaces"
 VERSION = 1
@@ -233,7 +237,7 @@ class SpaceParse:
                    stats=d.get("stats", {}), params=d.get("params", {}))
 
     @classmethod
-    def load(cls, store) -> "SpaceParse":
+    def load(cls, store: TileStore) -> "SpaceParse":
         """The parse stored in a tile store's ``meta/spaces``."""
         doc = store.doc(DOC)
         if doc is None:
@@ -313,7 +317,8 @@ def _initial_boxes(store, grid: Grid, floors: list[tuple[int, int]]) -> list[Box
     return [Box(f, u0, u1, v0, v1) for f in range(len(floors))]
 
 
-def parse_spaces(store, *, client=None, params: SpaceParams | None = None) -> "SpaceParse":
+def parse_spaces(store: TileStore, *, client: Client | None = None, params: SpaceParams | None = None
+                 ) -> SpaceParse:
     """Parse a tile store into spaces; writes ``cell_id``/``space_id`` in every tile and ``meta/spaces``.
 
     Parameters

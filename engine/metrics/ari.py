@@ -16,12 +16,16 @@ Points with label -1:
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
 
+from tiles.store import TileStore
 from tiles.tasks import run_tasks
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 
 def contingency_pairs(truth: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -113,8 +117,8 @@ def _tile_pairs(tile: str, store, truth: str, pred: str) -> tuple[np.ndarray, np
     return contingency_pairs(cols[truth], cols[pred])
 
 
-def distributed_contingency(store, truth: str = "gt_space", pred: str = "space_id", client=None
-                            ) -> tuple[np.ndarray, np.ndarray]:
+def distributed_contingency(store: TileStore, truth: str = "gt_space", pred: str = "space_id",
+                            client: Client | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The summed sparse contingency table of two per-point arrays of a tile store, as (pairs, counts)."""
     names = store.meta.names()
     for name in (truth, pred):
@@ -128,6 +132,7 @@ def distributed_contingency(store, truth: str = "gt_space", pred: str = "space_i
     return sum_pairs(parts)
 
 
-def distributed_ari(store, truth: str = "gt_space", pred: str = "space_id", client=None) -> float:
+def distributed_ari(store: TileStore, truth: str = "gt_space", pred: str = "space_id",
+                    client: Client | None = None) -> float:
     """ARI of ``pred`` against ``truth`` over all points of a tile store, one contingency table per tile."""
     return ari_from_contingency(contingency_table(*distributed_contingency(store, truth, pred, client)))
