@@ -41,10 +41,8 @@ PARSE_TARGET_S = 60.0
 
 def _first_pass_inputs(store, client):
     """The frame, grid, storeys and one box per storey, as parse_spaces has them before its first slicing pass."""
-    from engine.spaces import SpaceParams, parse_spaces  # noqa: F401
-
     from engine.histograms import BoxIndex, Grid
-    from engine.spaces import SpaceParse
+    from engine.spaces import SpaceParams, SpaceParse
 
     parse = SpaceParse.load(store)
     p = SpaceParams.from_config()
@@ -130,7 +128,8 @@ def run(quick: bool = False) -> dict[str, Any]:
         del raw, keys, bins, key, b, flat
         load1 = os.getloadavg()[0]
     ratio = numpy_s / pass_s
-    summary = {"points": n, "pass_vs_numpy_in_memory": round(ratio, 3), "pass_vs_bare_bincount": round(bare_s / pass_s, 3),
+    summary = {"points": n, "pass_vs_numpy_in_memory": round(ratio, 3),
+               "pass_vs_bare_bincount": round(bare_s / pass_s, 3),
                "parse_s": round(parse_s, 1), "peak_MiB_per_process": common.mib(mem.peak_single),
                "load_average": [round(load0, 1), round(load1, 1)], "cache": cache_dir()}
     missed = []

@@ -441,7 +441,8 @@ def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]]
         rects = [cells[i].box for i in members]
         fp, area = union_footprint(rects, frame)
         nbs = [Neighbour(o, faces[(s, o)]) for o in nb_of.get(s, [])]
-        zr = [float(zmin[s]), float(zmax[s])] if np.isfinite(zmin[s]) else list(floor_list[boxes[members[0]].floor].z_range)
+        zr = ([float(zmin[s]), float(zmax[s])] if np.isfinite(zmin[s])
+              else list(floor_list[boxes[members[0]].floor].z_range))
         spaces.append(Space(s, boxes[members[0]].floor, members, fp, area, zr, int(space_counts[s]),
                             touched.get(s, []), nbs))
     return SpaceParse(frame, bw, zb, floor_list, cells, dividers, spaces, point_count=int(store.meta.point_count),
