@@ -25,7 +25,7 @@ import numpy as np
 from scipy import ndimage
 
 from engine.dividers import vertical_params
-from engine.histograms import z_histogram
+from engine.histograms import share, z_histogram
 from engine.metrics.ari import ari_from_contingency, contingency_pairs, contingency_table, sum_pairs
 from engine.slicing import find_storeys
 from tiles.tasks import run_tasks
@@ -136,7 +136,8 @@ def _tile_contingency(tile: str, store, rasters: list[LabelRaster]) -> tuple[np.
 def raster_ari(store, rasters: list[LabelRaster], client=None) -> float:
     """ARI of the points labelled by the rasters against ``gt_space`` (per-tile tables summed)."""
     tiles = [t.name for t in store.tiles]
-    parts = run_tasks(_tile_contingency, tiles, client=client, label="baseline ARI", extra_args=(store, rasters))
+    parts = run_tasks(_tile_contingency, tiles, client=client, label="baseline ARI",
+                      extra_args=(store, share(client, rasters)))
     return ari_from_contingency(contingency_table(*sum_pairs(parts)))
 
 
