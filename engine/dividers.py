@@ -59,9 +59,9 @@ from scipy import ndimage
 class DividerParams:
     """Physical parameters (metres) of the divider search along one kind of axis.
 
-    The defaults are for walls seen along a horizontal axis: real walls are
-    0.10-0.35 m thick; the stop widths span 0.06-0.50 m to leave a margin for
-    thin partitions and thick masonry.  See :func:`vertical_params` for slabs.
+    The defaults are for walls seen along a horizontal axis: most walls are
+    0.10-0.35 m thick; the stop widths span 0.06-0.80 m to take thin drywall and
+    thick structural or masonry walls too.  See :func:`vertical_params` for slabs.
     """
 
     #: Histogram resolution.
@@ -69,8 +69,8 @@ class DividerParams:
     #: Smallest and largest stop width δ (void thickness) and the number of widths between
     #: them (geometric progression).
     stop_min: float = 0.06
-    stop_max: float = 0.50
-    stop_steps: int = 10
+    stop_max: float = 0.80
+    stop_steps: int = 12
     #: Pass widths c (width of each margin): from a crisp scanned face to a smeared one.
     pass_widths: tuple[float, ...] = (0.04, 0.08, 0.16, 0.32)
     #: The gap may hold at most ``1 - min_contrast`` of the weaker margin's density.
@@ -92,7 +92,7 @@ class DividerParams:
     #: The gap would hold at least this many points at the weaker margin's density.
     min_gap_points: float = 20.0
     #: A run of empty bins at least this long separates what lies on its two sides.
-    empty_run: float = 0.6
+    empty_run: float = 1.0
 
     def bank(self) -> np.ndarray:
         """The filter bank as ``(k, 2)`` integer ``(δ, c)`` in bins, δ ≥ 1, c ≥ 1, no duplicates."""

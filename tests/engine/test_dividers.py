@@ -10,7 +10,7 @@ from engine.dividers import (DividerParams, bank_responses, detect_dividers, emp
 BW = 0.02
 
 
-def room_signal(walls, *, length=20.0, slice_width=5.0, density=300.0, height=2.8, seed=0, faces=True):
+def room_signal(walls, *, length=21.0, slice_width=5.0, density=300.0, height=2.8, seed=0, faces=True):
     """Expected counts of a 1-D histogram across rooms: floor + ceiling everywhere, walls as void + two faces.
 
     ``walls``: (centre, thickness) in metres.  Poisson-sampled, so the signal is noisy like a scan.
@@ -65,7 +65,7 @@ def test_density_scaled_gives_the_same_dividers(factor):
 
 
 def test_several_walls_of_different_thickness_are_all_found():
-    walls = [(2.5, 0.08), (5.0, 0.12), (8.0, 0.2), (11.5, 0.3), (15.5, 0.45)]
+    walls = [(2.5, 0.08), (5.0, 0.12), (8.0, 0.2), (11.5, 0.3), (15.5, 0.45), (18.5, 0.7)]
     h, _ = room_signal(walls)
     found = detect_dividers(h)
     assert [round(d.position, 1) for d in found] == pytest.approx([w[0] for w in walls], abs=0.05)
@@ -123,7 +123,7 @@ def test_bank_responses_equal_the_convolution_with_the_filter():
 def test_filter_bank_spans_the_documented_widths():
     p = DividerParams()
     bank = p.bank()
-    assert bank[:, 0].min() * BW == pytest.approx(0.06) and bank[:, 0].max() * BW == pytest.approx(0.5)
+    assert bank[:, 0].min() * BW == pytest.approx(0.06) and bank[:, 0].max() * BW == pytest.approx(0.8)
     assert sorted(set(bank[:, 1] * BW)) == pytest.approx([0.04, 0.08, 0.16, 0.32])
     v = vertical_params().bank()
     assert v[:, 0].max() * BW == pytest.approx(2.0)
