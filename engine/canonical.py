@@ -7,15 +7,18 @@ For every space, from its own points only (the same at training and at run time)
    normal of every planar vertical voxel patch (from voxel moments, see
    :mod:`engine.moments`) votes with its point count for an angle modulo 90
    degrees (circular mean of ``4 * angle``).  Without such patches the
-   principal axis of the points in plan is used.
+   principal axis of the points in plan is used.  The angle is then sharpened
+   (:func:`refine_yaw`) to the one whose 1 cm projection histograms of the
+   walls' height band are sharpest: thin boxes need a yaw right to 0.05 degree.
 3. **Entrance wall.**  Among the four walls of the aligned box, the entrance is
    the one with the widest *door-like opening*: a run of along-wall bins,
    0.55 to 3.5 m wide, whose slab of points next to the wall face is empty from
    0.25 m above the floor up to 1.8 m (or 70 % of the height), while the face
-   elsewhere has points (a real divider).  When the ``meta/spaces`` document
-   gives the connection areas with neighbouring spaces, the wall nearest the
-   largest connection (a shared face) wins instead.  **Fallback**: the longest
-   wall; between equally long walls (within 5 cm) the one holding more points.
+   elsewhere has points (a real divider).  **Fallbacks** when no wall has
+   one (closed doors, open plans): when the ``meta/spaces`` document gives the
+   connection areas with neighbouring spaces, the wall nearest the largest one
+   (the longest shared face); else the longest wall, and between equally long
+   walls (within 5 cm) the one holding more points.
    ``x`` then runs along the entrance wall, ``y`` points from it into the
    space, and ``(x, y, z)`` is right-handed.
 4. **Unit cube.**  The aligned points are scaled to ``[0, 1]^3`` by the robust
@@ -160,6 +163,47 @@ def _wrap_quarter(a: float) -> float:
     return float(q / 2 if np.isclose(a, -q / 2) else a)
 
 
+def refine_yaw(xyz: np.ndarray, yaw: float, *, span: float = np.radians(1.5), bin_size: float = 0.01,
+               max_points: int = 200_000) -> float:
+    """Sharpen a Manhattan yaw: the angle near ``yaw`` whose projections on both axes are sharpest.
+
+    Points of the middle height band (walls, not floor or ceiling) are projected
+    on the rotated x and y axes into ``bin_size`` histograms; the sum of squared
+    bin counts peaks when the walls fall in the fewest bins.  Two passes
+    (``span`` in 61 steps, then one step in 21), the maximum refined by a parabola:
+    about 0.01 degree, where the voxel-normal vote alone is off by up to half a
+    degree (too much for a 3 cm thick, 9 m long wall box).
+    """
+    xyz = np.asarray(xyz, dtype=np.float64)
+    z = xyz[::max(1, len(xyz) // max_points), 2]
+    z0, z1 = np.quantile(z, [0.02, 0.98]) if len(z) else (0.0, 0.0)
+    band = xyz[(xyz[:, 2] > z0 + 0.25 * (z1 - z0)) & (xyz[:, 2] < z1 - 0.25 * (z1 - z0))]
+    if len(band) < 100:
+        return float(yaw)
+    band = band[::max(1, len(band) // max_points), :2]
+    band = band - band.mean(axis=0)
+
+    def sharpness(a: float) -> float:
+        c, s = np.cos(a), np.sin(a)
+        total = 0.0
+        for u in (c * band[:, 0] + s * band[:, 1], -s * band[:, 0] + c * band[:, 1]):
+            h = np.bincount(np.floor((u - u.min()) / bin_size).astype(np.int64)).astype(np.float64)
+            total += float(np.dot(h, h))
+        return total
+
+    best = float(yaw)
+    for width, steps in ((span, 61), (2 * span / 60, 21)):
+        grid = best + np.linspace(-width, width, steps)
+        vals = np.array([sharpness(a) for a in grid])
+        i = int(np.argmax(vals))
+        best = float(grid[i])
+        if 0 < i < steps - 1:
+            den = vals[i - 1] - 2 * vals[i] + vals[i + 1]
+            if den < 0:
+                best += float(0.5 * (vals[i - 1] - vals[i + 1]) / den) * (grid[1] - grid[0])
+    return _wrap_quarter(best)
+
+
 def _robust_box(m: np.ndarray, quantile: float) -> tuple[np.ndarray, np.ndarray]:
     if len(m) == 0:
         return np.zeros(3), np.ones(3)
@@ -231,7 +275,7 @@ def estimate_frame(xyz: np.ndarray, *, connection: np.ndarray | None = None, qua
     connection
         Optional ``(2,)`` plan position (same coordinates as ``xyz``) of the
         largest connection area with a neighbouring space (from ``meta/spaces``):
-        the nearest wall is taken as the entrance.
+        when no wall has a door-like opening, the nearest wall is the entrance.
     quantile
         The robust box of the space drops this fraction of points at each end of each axis.
     yaw
@@ -240,19 +284,22 @@ def estimate_frame(xyz: np.ndarray, *, connection: np.ndarray | None = None, qua
     xyz = np.asarray(xyz, dtype=np.float64)
     if len(xyz) < 4:
         raise ValueError("a space needs at least 4 points for a canonical frame")
-    base = _wrap_quarter(dominant_yaw(xyz) if yaw is None else float(yaw))
-    center = np.median(xyz, axis=0)
-    m = (xyz - center) @ rotation_z(base)
-    lo, hi = _robust_box(m, quantile)
+    base = _wrap_quarter(refine_yaw(xyz, dominant_yaw(xyz)) if yaw is None else float(yaw))
+    # statistics of the box from an evenly strided subsample of large spaces (deterministic)
+    sub = xyz[::max(1, len(xyz) // 400_000)]
+    center = np.median(sub, axis=0)
+    lo, hi = _robust_box((sub - center) @ rotation_z(base), quantile)
+    # openings from an evenly strided subsample of at most a million points (density is relative)
+    m = (xyz[::max(1, len(xyz) // 1_000_000)] - center) @ rotation_z(base)
     widths = opening_widths(m, lo, hi)
     lengths = np.array([hi[0] - lo[0], hi[1] - lo[1], hi[0] - lo[0], hi[1] - lo[1]])
     info: dict[str, Any] = {"openings": widths.round(3).tolist()}
-    if connection is not None:
+    if widths.max() > 0:
+        side, how = int(np.argmax(widths)), "opening"
+    elif connection is not None:
         c = (np.array([connection[0], connection[1], 0.0]) - center) @ rotation_z(base)
         d = np.array([abs(c[1] - lo[1]), abs(c[0] - hi[0]), abs(c[1] - hi[1]), abs(c[0] - lo[0])])
         side, how = int(np.argmin(d)), "neighbour"
-    elif widths.max() > 0:
-        side, how = int(np.argmax(widths)), "opening"
     else:
         longest = lengths >= lengths.max() - 0.05
         counts = np.array([np.sum(np.abs(m[:, 1] - lo[1]) < 0.3), np.sum(np.abs(m[:, 0] - hi[0]) < 0.3),
@@ -260,7 +307,7 @@ def estimate_frame(xyz: np.ndarray, *, connection: np.ndarray | None = None, qua
         side, how = int(np.argmax(np.where(longest, counts, -1))), "longest-wall"
     final = base + side * np.pi / 2
     final = float(np.arctan2(np.sin(final), np.cos(final)))
-    mc = (xyz - center) @ rotation_z(final)
+    mc = (sub - center) @ rotation_z(final)
     lo, hi = _robust_box(mc, quantile)
     origin = center + rotation_z(final) @ lo
     info["side"] = SIDES[side]

@@ -8,13 +8,16 @@ For every space (one task each, its points gathered from the tiles it touches):
 3. for every class, every window of the dictionary slid over the unit cube and
    scored by the class's linear SVM (:func:`engine.sliding.score_windows`);
    windows above ``score-threshold``, the ``pre-nms`` best per window shape;
-4. per class, non-maximum suppression (3D IoU ``nms-iou``), at most
-   ``max-per-class`` proposals;
+4. per class, non-maximum suppression (3D IoU ``nms-iou`` of the boxes grown
+   to at least ``nms-min-size`` metres, so that parallel slivers of one surface
+   suppress each other), at most ``max-per-class`` proposals;
 5. thin-box refinement: along an axis where a detection is at most
-   ``thin-voxels`` voxels thick (walls, floors, ceilings, boards...), its extent
-   becomes the dense run around the peak of its points' histogram along that
-   axis (``refine-bin`` metres), so that a 2 cm wall is not reported as a 10 cm
-   voxel slab; the points are found through a voxel-sorted index, not a search;
+   ``thin-voxels`` voxels thick and its window's learned size is under half a
+   voxel (surfaces seen from one side: walls, floors, ceilings), its extent
+   becomes the dense run (bins holding at least 2 % of the peak) around the peak
+   of its points' histogram along that axis (``refine-bin`` metres), so that a
+   3 cm wall is not reported as a 10 cm voxel slab; the points are found through
+   a voxel-sorted index, not a search;
 6. the proposals, mapped back to world coordinates through the frame
    (:class:`engine.proposals.Proposal`: unit-cube P, S, B plus the world box).
 
@@ -30,7 +33,7 @@ import numpy as np
 from engine import config
 from engine import moments as mom
 from engine.canonical import CanonicalFrame, estimate_frame
-from engine.features import SpaceVolume
+from engine.features import SpaceVolume, window_features
 from engine.model import Model, load_model
 from engine.proposals import Proposal
 from engine.sliding import non_maximum_suppression, score_windows, window_shape
@@ -44,11 +47,14 @@ class DetectionSettings:
     """Run-time settings of the detector (see ``engine/detection.yaml``)."""
 
     stride: float = 0.25
+    max_stride: float = 0.2
     min_window_points: int = 10
     score_threshold: float = -0.75
     pre_nms: int = 300
     nms_iou: float = 0.3
+    nms_min_size: float = 0.3
     max_per_class: int = 30
+    local_search: bool = True
     refine: bool = True
     thin_voxels: int = 2
     refine_bin: float = 0.005
@@ -57,6 +63,8 @@ class DetectionSettings:
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
             raise ValueError(f"stride must be in (0, 1], got {self.stride}")
+        if self.max_stride <= 0:
+            raise ValueError(f"max-stride must be positive, got {self.max_stride}")
         if not 0 <= self.nms_iou <= 1:
             raise ValueError(f"nms-iou must be in [0, 1], got {self.nms_iou}")
         if self.max_per_class < 1 or self.pre_nms < 1:
@@ -104,7 +112,7 @@ class PointIndex:
         return self.points[base + np.arange(total)]
 
 
-def refine_extent(values: np.ndarray, lo: float, hi: float, bin_size: float, frac: float = 0.05) -> tuple[float, float]:
+def refine_extent(values: np.ndarray, lo: float, hi: float, bin_size: float, frac: float = 0.02) -> tuple[float, float]:
     """The dense run of ``values`` around the peak of their histogram in ``[lo, hi]`` (a surface's extent)."""
     if len(values) == 0:
         return lo, hi
@@ -130,6 +138,37 @@ def prepare_space(points: SpacePoints, model: Model, frame: CanonicalFrame | Non
     """Frame and integral volume of one space for a model's voxel size."""
     frame = frame if frame is not None else space_frame(points)
     return SpaceVolume.build(points.xyz, points.rgb, frame, model.voxel, model.max_cells)
+
+
+def local_search(vol: SpaceVolume, lo: np.ndarray, hi: np.ndarray, scores: np.ndarray, weights: np.ndarray,
+                 bias: float, layout, stride: float, max_stride: float | None) -> tuple[np.ndarray, np.ndarray,
+                                                                                          np.ndarray]:
+    """Move each detection by half a sliding step along each axis (27 candidates) to its best score.
+
+    The coarse grid places a window up to half a step off; its score is highest
+    where it fits, so the best of the half-step neighbours is kept (the window's
+    size is unchanged).  Cheap: only the few windows that survived NMS are moved.
+    """
+    if not len(lo):
+        return lo, hi, scores
+    n = np.asarray(vol.grid.shape)
+    w = hi - lo
+    step = np.maximum(1, np.round(w * stride)).astype(np.int64)
+    if max_stride is not None:
+        step = np.minimum(step, np.maximum(1, np.floor(max_stride / vol.grid.voxel + 1e-9)).astype(np.int64))
+    half = np.where(w < n, np.maximum(step // 2, 1), 0)  # spanning axes do not move
+    offs = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), axis=-1).reshape(-1, 3)
+    cand_lo = lo[:, None, :] + offs[None] * half[:, None, :]
+    cand_lo = np.clip(cand_lo, 0, n - w[:, None, :])
+    cand_hi = cand_lo + w[:, None, :]
+    flat_lo, flat_hi = cand_lo.reshape(-1, 3), cand_hi.reshape(-1, 3)
+    feats = window_features(vol.iv, vol.grid, flat_lo, flat_hi, layout)
+    cand = (feats @ np.where(layout.mask, weights, 0.0) + bias).reshape(len(lo), -1)
+    best = np.argmax(cand, axis=1)
+    idx = np.arange(len(lo))
+    better = cand[idx, best] > scores
+    new_lo = np.where(better[:, None], cand_lo[idx, best], lo)
+    return new_lo, new_lo + w, np.where(better, cand[idx, best], scores)
 
 
 @dataclass
@@ -160,7 +199,7 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                 continue
             shape = window_shape(atom.size_in(grid.extent), grid)
             ws = score_windows(vol, shape, model.weights[c], model.bias[c], model.layout, settings.stride,
-                               settings.min_window_points)
+                               settings.min_window_points, settings.max_stride)
             flat = ws.scores.ravel()
             ok = np.nonzero(flat > settings.score_threshold)[0]
             if len(ok) > settings.pre_nms:
@@ -172,7 +211,16 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         if not los:
             continue
         lo, hi, sc, at = np.concatenate(los), np.concatenate(his), np.concatenate(scs), np.concatenate(ats)
-        keep = non_maximum_suppression(lo, hi, sc, settings.nms_iou, settings.max_per_class)
+        # NMS on boxes grown to nms-min-size: parallel slivers of one surface suppress each other
+        pad = np.clip(np.ceil(settings.nms_min_size / grid.voxel) - (hi - lo), 0, None) / 2.0
+        keep = non_maximum_suppression(lo - pad, hi + pad, sc, settings.nms_iou, settings.max_per_class)
+        if settings.local_search:
+            lo, hi, sc = lo[keep], hi[keep], sc[keep]
+            at = at[keep]
+            lo, hi, sc = local_search(vol, lo, hi, sc, model.weights[c], model.bias[c], model.layout,
+                                      settings.stride, settings.max_stride)
+            pad = np.clip(np.ceil(settings.nms_min_size / grid.voxel) - (hi - lo), 0, None) / 2.0
+            keep = non_maximum_suppression(lo - pad, hi + pad, sc, settings.nms_iou, settings.max_per_class)
         lo_all.append(lo[keep]), hi_all.append(hi[keep]), sc_all.append(sc[keep])
         cl_all.append(np.full(len(keep), c)), at_all.append(at[keep])
     if not lo_all:
@@ -180,17 +228,20 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         return Detections(z3, z3, z3.astype(float), z3.astype(float), np.zeros(0), np.zeros(0, np.int64),
                           np.zeros(0, np.int64))
     lo, hi = np.concatenate(lo_all), np.concatenate(hi_all)
+    at_all_cat = np.concatenate(at_all)
     vox = grid.voxel
     lo_m, hi_m = lo * vox, hi * vox
     if settings.refine and index is not None:
         for i in range(len(lo)):
-            thin = np.nonzero(hi[i] - lo[i] <= settings.thin_voxels)[0]
+            # surfaces thinner than half a voxel (walls, floors, ceilings as seen from inside)
+            need = atoms[int(at_all_cat[i])].size_in(grid.extent)
+            thin = np.nonzero((hi[i] - lo[i] <= settings.thin_voxels) & (need < 0.5 * vox))[0]
             if not len(thin):
                 continue
             pts = index.points_in(lo[i], hi[i])
             for a in thin:
                 lo_m[i, a], hi_m[i, a] = refine_extent(pts[:, a], lo_m[i, a], hi_m[i, a], settings.refine_bin)
-    return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), np.concatenate(cl_all), np.concatenate(at_all))
+    return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), np.concatenate(cl_all), at_all_cat)
 
 
 def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,
@@ -211,22 +262,49 @@ def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,
     return out
 
 
+def connection_hints(store, space_array: str = "space_id") -> dict[int, np.ndarray]:
+    """Per parsed space, the store-local plan position of its longest shared face (``meta/spaces``).
+
+    Only for ``space_id`` spaces of a store that has the document; the canonical
+    frame uses it when no wall shows a door-like opening.
+    """
+    doc = store.doc("spaces") if space_array == "space_id" else None
+    out: dict[int, np.ndarray] = {}
+    if not doc:
+        return out
+    origin = np.asarray(store.meta.origin[:2], dtype=np.float64)
+    for sp in doc.get("spaces", []):
+        best, where = 0.0, None
+        for nb in sp.get("neighbours", []):
+            for face in nb.get("faces", []):
+                seg = np.asarray(face.get("segment", []), dtype=np.float64)
+                if seg.shape != (2, 2):
+                    continue
+                length = float(np.hypot(*(seg[1] - seg[0])))
+                if length > best:
+                    best, where = length, seg.mean(axis=0) - origin
+        if where is not None:
+            out[int(sp["id"])] = where
+    return out
+
+
 def detect_space(points: SpacePoints, model: Model, settings: DetectionSettings | None = None,
-                 origin: np.ndarray | None = None) -> list[Proposal]:
+                 origin: np.ndarray | None = None, connection: np.ndarray | None = None) -> list[Proposal]:
     """All proposals of one space (its points in store-local coordinates)."""
     settings = settings or DetectionSettings.from_config()
     if len(points.xyz) < max(settings.min_window_points, 4):
         return []
-    vol = prepare_space(points, model)
+    vol = prepare_space(points, model, space_frame(points, connection))
     index = PointIndex(vol.frame.to_metric(points.xyz), vol.grid) if settings.refine else None
     det = detect_in_volume(vol, model, settings, index)
     return to_proposals(det, vol, model, points.space_id, np.zeros(3) if origin is None else origin)
 
 
-def _detect_task(ref: SpaceRef, store, model: Model, space_array: str,
+def _detect_task(job: tuple[SpaceRef, np.ndarray | None], store, model: Model, space_array: str,
                  settings: DetectionSettings) -> list[Proposal]:
+    ref, hint = job
     points = load_space(store, ref, space_array)
-    return detect_space(points, model, settings, np.asarray(store.meta.origin, dtype=np.float64))
+    return detect_space(points, model, settings, np.asarray(store.meta.origin, dtype=np.float64), hint)
 
 
 def detect(store, *, model: Model | str | None = None, client=None, space_array: str = "space_id",
@@ -255,11 +333,13 @@ def detect(store, *, model: Model | str | None = None, client=None, space_array:
         model = load_model(model)
     settings = settings or DetectionSettings.from_config()
     refs = index_spaces(store, space_array, client=client)
+    hints = connection_hints(store, space_array)
     if client is not None and refs:
         [model_arg] = client.scatter([model], broadcast=True)
     else:
         model_arg = model
-    results = run_tasks(_detect_task, refs, client=client, label="detect elements",
+    results = run_tasks(_detect_task, [(r, hints.get(r.space_id)) for r in refs], client=client,
+                        label="detect elements",
                         keys=[f"space {r.space_id}" for r in refs],
                         extra_args=(store, model_arg, space_array, settings))
     proposals = [p for r in results for p in r]

@@ -3,7 +3,8 @@
 For each class, the training instances' tightest boxes (in their space's
 canonical frame) and occupancy patterns (K x K x K) are grouped with Affinity
 Propagation (scikit-learn, ``affinity="precomputed"``).  The similarity of two
-instances is ``iou_weight * IoU + (1 - iou_weight) * agreement - 1`` where
+instances is ``IoU^w * agreement^(1 - w) - 1`` (``w = iou_weight``, a weighted
+geometric mean, so that a poor IoU is not made up for by agreeing patterns) where
 ``agreement`` is the fraction of the K^3 sub-boxes on which their occupancy
 patterns agree and IoU is the overlap of their two boxes placed at a common
 corner.  One addition to the paper: IoU is taken per axis in the frame where the
@@ -77,7 +78,7 @@ class WindowDictionary:
     k
         Sub-boxes per axis of the occupancy patterns.
     iou_weight
-        Weight of the box IoU against occupancy agreement in the similarity.
+        Exponent of the box IoU against occupancy agreement in the similarity.
     preference_quantile
         AP preference = this quantile of the similarities (0.5 is scikit-learn's median);
         lower values give fewer windows.
@@ -121,8 +122,9 @@ class WindowDictionary:
 
     def similarity(self, unit: np.ndarray, metric: np.ndarray, occ: np.ndarray) -> np.ndarray:
         """The AP similarity matrix of instances (``<= 0``, 0 on identical ones)."""
-        return (self.iou_weight * size_iou(unit, metric)
-                + (1.0 - self.iou_weight) * occupancy_agreement(occ) - 1.0)
+        iou = size_iou(unit, metric)
+        agree = occupancy_agreement(occ)
+        return iou ** self.iou_weight * agree ** (1.0 - self.iou_weight) - 1.0
 
     def fit(self, class_codes: np.ndarray, unit_sizes: np.ndarray, metric_sizes: np.ndarray,
             occupancy: np.ndarray) -> "WindowDictionary":

@@ -166,10 +166,12 @@ def local_features(sums: np.ndarray, n_window: np.ndarray, k: int, min_points: i
     out[..., 0] = occ
     out[..., 1] = np.where(occ, n / np.maximum(n_window, 1.0) * k ** 3, 0.0)
     out[..., 2:5] = np.where(occ[..., None], sums[..., 10:13] / safe[..., None], 0.0)
-    lam, total, vec = mom.smallest_eigen(mom.covariance(sums))
-    geo = occ & (n >= 3) & (total > 0)
-    out[..., 5:8] = np.where(geo[..., None], np.abs(vec), 0.0)
-    out[..., 8] = np.where(geo, lam / np.where(total > 0, total, 1.0), 0.0)
+    geo = occ & (n >= 3)
+    if geo.any():  # eigen-analysis only where there is a surface to analyse
+        lam, total, vec = mom.smallest_eigen(mom.covariance(sums[geo]))
+        ok = total > 0
+        out[geo, 5:8] = np.where(ok[:, None], np.abs(vec), 0.0)
+        out[geo, 8] = np.where(ok, lam / np.where(ok, total, 1.0), 0.0)
     return out
 
 
@@ -224,8 +226,20 @@ class SpaceVolume:
         return cls(frame, grid, mom.integral_volume(m), int(len(xyz)))
 
     def voxel_box(self, position: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unit-cube boxes ``(n, 3)`` snapped to voxel boxes ``[lo, hi)``, at least one voxel, inside the grid."""
+        """Unit-cube boxes ``(n, 3)`` snapped to voxel boxes ``[lo, hi)`` inside the grid.
+
+        Ends are rounded to the nearest voxel boundary; a box thinner than that
+        along an axis becomes the one voxel holding its centre.
+        """
         shape = np.asarray(self.grid.shape)
-        lo = np.clip(np.round(np.asarray(position) * shape), 0, shape - 1).astype(np.int64)
-        hi = np.clip(np.round((np.asarray(position) + np.asarray(size)) * shape), 1, shape).astype(np.int64)
-        return lo, np.maximum(hi, lo + 1)
+        p = np.asarray(position, dtype=np.float64) * shape
+        q = (np.asarray(position, dtype=np.float64) + np.asarray(size, dtype=np.float64)) * shape
+        lo = np.round(p).astype(np.int64)
+        hi = np.round(q).astype(np.int64)
+        thin = hi <= lo
+        centre = np.floor((p + q) / 2.0).astype(np.int64)
+        lo = np.where(thin, centre, lo)
+        hi = np.where(thin, centre + 1, hi)
+        lo = np.clip(lo, 0, shape - 1)
+        hi = np.clip(hi, lo + 1, shape)
+        return lo, hi

@@ -2,7 +2,8 @@
 
 Every window of the dictionary is slid over the space's voxel grid: along each
 axis from the ``0`` face to the ``1`` face with a stride of ``stride`` times the
-window's size (at least one voxel), always including the position flush with
+window's size (at least one voxel, at most ``max-stride`` metres: a quarter of a
+1.6 m window would misplace it by up to 20 cm), always including the position flush with
 the far face, so windows anchored at either face of the unit cube exist and a
 window as long as the space has exactly one position along that axis (walls,
 floor, ceiling).  The linear SVM score ``w . Phi + b`` of all positions of one
@@ -40,11 +41,24 @@ def window_shape(metric_size: np.ndarray, grid: mom.VoxelGrid) -> np.ndarray:
     return np.clip(np.round(np.asarray(metric_size) / grid.voxel), 1, shape).astype(np.int64)
 
 
-def axis_positions(n: int, w: int, stride: float) -> np.ndarray:
-    """Window starts along one axis of ``n`` voxels for a window of ``w`` voxels: both faces included."""
+def axis_positions(n: int, w: int, stride: float, max_step: int | None = None) -> np.ndarray:
+    """Window starts along one axis of ``n`` voxels for a window of ``w`` voxels: both faces included.
+
+    The step is ``stride`` times the window (at least one voxel, at most ``max_step`` voxels).
+    """
     step = max(1, int(round(w * stride)))
+    if max_step is not None:
+        step = max(1, min(step, int(max_step)))
     last = max(n - w, 0)
     return np.unique(np.append(np.arange(0, last + 1, step), last)).astype(np.int64)
+
+
+def window_positions(grid: mom.VoxelGrid, shape: np.ndarray, stride: float,
+                     max_stride: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sliding starts along x, y, z of a window of ``shape`` voxels (``max_stride`` in metres caps the step)."""
+    n = grid.shape
+    cap = [None] * 3 if max_stride is None else [max(1, int(np.floor(max_stride / v + 1e-9))) for v in grid.voxel]
+    return tuple(axis_positions(int(n[a]), int(shape[a]), stride, cap[a]) for a in range(3))
 
 
 def _intervals(pos: np.ndarray, w: int, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -74,7 +88,8 @@ class WindowScores:
 
 
 def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias: float,
-                  layout: FeatureLayout, stride: float, min_points: int = 10) -> WindowScores:
+                  layout: FeatureLayout, stride: float, min_points: int = 10,
+                  max_stride: float | None = None) -> WindowScores:
     """The linear score of a window of ``shape`` voxels at every sliding position of a space.
 
     Equal, to rounding, to ``window_features(...) @ weights + bias`` for each window
@@ -87,7 +102,7 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
     w = np.where(layout.mask, np.asarray(weights, dtype=np.float64), 0.0)
     wg = w[:layout.n_global]
     wl = w[layout.n_global:].reshape(k, k, k, -1)
-    px, py, pz = (axis_positions(int(n[a]), int(shape[a]), stride) for a in range(3))
+    px, py, pz = window_positions(grid, shape, stride, max_stride)
     ux, ix = _intervals(px, int(shape[0]), k)
     uy, iy = _intervals(py, int(shape[1]), k)
     uz, iz = _intervals(pz, int(shape[2]), k)
@@ -99,10 +114,11 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
     size = np.broadcast_to(shape, lo.shape)
     scores = global_features(lo / n, size / n, size * grid.voxel) @ wg + float(bias)
     ratio_acc = np.zeros_like(scores)
-    # local part, in batches of x positions so that the sub-box table stays bounded
+    # local part, in batches of x positions so that the sub-box table stays bounded; each of the
+    # K^3 slots gathers the features of its sub-box for all windows at once
     per_x = max(1, SUBBOX_BATCH // max(len(uy) * len(uz), 1))
-    wl_noratio = wl.copy()
-    wl_noratio[..., 1] = 0.0
+    w_lin = wl.copy()
+    w_lin[..., 1] = 0.0
     for s in range(0, len(px), per_x):
         sl = slice(s, s + per_x)
         need, sub_ix = np.unique(ix[sl], return_inverse=True)
@@ -114,7 +130,7 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
             for b in range(k):
                 for c in range(k):
                     f = feats[np.ix_(sub_ix[:, a], iy[:, b], iz[:, c])]
-                    scores[sl] += f @ wl_noratio[a, b, c]
+                    scores[sl] += f @ w_lin[a, b, c]
                     ratio_acc[sl] += f[..., 1] * wl[a, b, c, 1]
     scores += ratio_acc / np.maximum(counts, 1.0) * k ** 3
     scores = np.where(counts >= min_points, scores, -np.inf)

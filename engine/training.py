@@ -27,6 +27,7 @@ Everything random is seeded (``seed``): a run is reproducible.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from dataclasses import dataclass, field, fields
@@ -38,11 +39,12 @@ from sklearn.svm import LinearSVC
 
 from engine import config
 from engine import moments as mom
+from engine.canonical import CanonicalFrame
 from engine.detection import DetectionSettings, prepare_space, space_frame
 from engine.dictionary import WindowDictionary
 from engine.features import FeatureLayout, SpaceVolume, window_features
 from engine.model import Model
-from engine.sliding import axis_positions, grid_iou, score_windows, window_shape
+from engine.sliding import grid_iou, score_windows, window_positions, window_shape
 from engine.spacedata import SpaceRef, index_spaces, load_space
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
@@ -67,7 +69,7 @@ class TrainSettings:
     neg_iou: float = 0.4
     jitter_positives: int = 4
     random_negatives: int = 40
-    hard_negatives: int = 60
+    hard_negatives: int = 150
     max_negatives: int = 30000
     seed: int = 0
     preference_quantile: float = 0.5
@@ -75,6 +77,7 @@ class TrainSettings:
     max_instances: int = 400
     iou_weight: float = 0.5
     disabled: tuple[str, ...] = ()
+    classes: tuple[int, ...] = tuple(range(N_CLASSES))
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
@@ -86,12 +89,15 @@ class TrainSettings:
         if self.rounds < 0 or min(self.jitter_positives, self.random_negatives, self.hard_negatives) < 0:
             raise ValueError("rounds and sample counts must be >= 0")
         self.disabled = tuple(self.disabled)
+        self.classes = tuple(int(c) for c in self.classes)
+        if not self.classes or not all(0 <= c < N_CLASSES for c in self.classes):
+            raise ValueError(f"classes must be element class codes 0..{N_CLASSES - 1}")
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "TrainSettings":
         kw: dict[str, Any] = {}
         for f in fields(cls):
-            if f.name == "disabled":
+            if f.name in ("disabled", "classes"):
                 continue
             key = f.name.replace("_", "-")
             v = config.get(f"detection.{key}") if f.name in ("k", "voxel", "max_cells") else \
@@ -114,6 +120,7 @@ class TrainJob:
     elements: list[dict[str, Any]]
     key: int
     building: str
+    frame: dict[str, Any] | None = None  # the space's canonical frame, once pass 1 has computed it
 
 
 @dataclass
@@ -193,7 +200,8 @@ def _instances_task(job: TrainJob, settings: TrainSettings) -> dict[str, np.ndar
         own = pts.gt_instance == gt["id"][i]
         occ[j] = _occupancy(metric[own], gt["lo"][i], gt["hi"][i], k, 1)
     size = gt["hi"][keep] - gt["lo"][keep]
-    return {"cls": gt["cls"][keep], "metric_size": size, "unit_size": size / frame.extent, "occupancy": occ}
+    return {"cls": gt["cls"][keep], "metric_size": size, "unit_size": size / frame.extent, "occupancy": occ,
+            "frame": frame.to_json()}
 
 
 # -- samples ----------------------------------------------------------------------------------
@@ -208,14 +216,14 @@ def _window_key(atom: int, lo: np.ndarray) -> np.ndarray:
 
 
 def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: int,
-                  det: DetectionSettings) -> dict[int, dict[str, np.ndarray]]:
+                  det: DetectionSettings, active: tuple[int, ...]) -> dict[int, dict[str, np.ndarray]]:
     """Pass 2+: feature vectors of positives and negatives of every class in one space.
 
     Round 0: ground-truth windows, jittered positives, other classes' elements and
     random negatives.  Later rounds: margin violators of the current detectors.
     """
     pts = load_space(job.store, job.ref, "gt_space", truth=True)
-    vol = prepare_space(pts, model)
+    vol = prepare_space(pts, model, CanonicalFrame.from_json(job.frame) if job.frame else None)
     gt = _canonical_gt(job, vol, pts.gt_instance)
     usable = gt["points"] >= MIN_INSTANCE_POINTS
     vox = vol.grid.voxel
@@ -231,7 +239,7 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
             out[c]["pos"].append(feats[cls == c])
             out[c]["neg"].append(feats[cls != c])
     for c in range(N_CLASSES):
-        if round_ > 0 and not model.trained[c]:
+        if c not in active:
             continue
         mine = gt["cls"] == c
         rng = _rng(settings.seed, round_, job.key, c)
@@ -241,12 +249,13 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
                 continue
             shape = window_shape(atom.size_in(vol.grid.extent), vol.grid)
             if round_ == 0:
-                px, py, pz = (axis_positions(int(vol.grid.shape[a]), int(shape[a]), det.stride) for a in range(3))
+                px, py, pz = window_positions(vol.grid, shape, det.stride, det.max_stride)
                 counts = mom.box_sums_grid(vol.iv[..., :1], np.stack([px, px + shape[0]], 1),
                                            np.stack([py, py + shape[1]], 1), np.stack([pz, pz + shape[2]], 1))[..., 0]
                 valid = counts >= det.min_window_points
             else:
-                ws = score_windows(vol, shape, model.weights[c], model.bias[c], lay, det.stride, det.min_window_points)
+                ws = score_windows(vol, shape, model.weights[c], model.bias[c], lay, det.stride, det.min_window_points,
+                                   det.max_stride)
                 px, py, pz = ws.px, ws.py, ws.pz
                 valid = ws.scores > -1.0
             best = np.zeros(valid.shape)
@@ -331,25 +340,28 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
     inst = run_tasks(_instances_task, jobs, client=client, label="training instances",
                      keys=[f"space {j.key}" for j in jobs], extra_args=(settings,))
     cls = np.concatenate([r["cls"] for r in inst])
+    jobs = [dataclasses.replace(j, frame=r["frame"]) for j, r in zip(jobs, inst)]  # frames computed once
     say(f"{len(jobs)} spaces, {len(cls)} element instances")
     dictionary = WindowDictionary(settings.k, iou_weight=settings.iou_weight,
                                   preference_quantile=settings.preference_quantile,
                                   max_instances=settings.max_instances, max_atoms=settings.max_atoms,
                                   random_state=settings.seed)
-    dictionary.fit(cls, np.concatenate([r["unit_size"] for r in inst]),
-                   np.concatenate([r["metric_size"] for r in inst]),
-                   np.concatenate([r["occupancy"] for r in inst]))
+    use = np.isin(cls, settings.classes)
+    dictionary.fit(cls[use], np.concatenate([r["unit_size"] for r in inst])[use],
+                   np.concatenate([r["metric_size"] for r in inst])[use],
+                   np.concatenate([r["occupancy"] for r in inst])[use])
     say(f"dictionary: {len(dictionary.atoms_)} windows "
         f"({', '.join(f'{ELEMENT_CLASSES[c]} {len(dictionary.atoms_of(c))}' for c in range(N_CLASSES))})")
-    trained = np.array([len(dictionary.atoms_of(c)) > 0 for c in range(N_CLASSES)])
+    trained = np.array([c in settings.classes and len(dictionary.atoms_of(c)) > 0 for c in range(N_CLASSES)])
     model = Model(layout, dictionary, np.zeros((N_CLASSES, layout.size)), np.zeros(N_CLASSES), trained,
                   voxel=settings.voxel, max_cells=settings.max_cells, stride=det.stride)
     samples = {c: Samples() for c in range(N_CLASSES)}
     mask = layout.mask
     history = []
+    active = tuple(c for c in range(N_CLASSES) if trained[c])
     for round_ in range(settings.rounds + 1):
         res = run_tasks(_samples_task, jobs, client=client, label=f"training samples, round {round_}",
-                        keys=[f"space {j.key}" for j in jobs], extra_args=(model, settings, round_, det))
+                        keys=[f"space {j.key}" for j in jobs], extra_args=(model, settings, round_, det, active))
         new = np.zeros(N_CLASSES, dtype=np.int64)
         for job, r in zip(jobs, res):
             for c in range(N_CLASSES):
@@ -383,7 +395,9 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
                         "positives": [int(sum(len(x) for x in samples[c].pos)) for c in range(N_CLASSES)],
                         "negatives": [samples[c].n_neg() for c in range(N_CLASSES)]})
         say(f"round {round_}: new negatives {new.tolist()}")
-        if round_ > 0 and not new.any():
+        # classes without new violators are done (their detector no longer changes)
+        active = tuple(c for c in active if trained[c] and (round_ == 0 or new[c] > 0))
+        if round_ > 0 and not active:
             break
     model.detection = det.to_json()
     model.svm = {"estimator": "sklearn.svm.LinearSVC (liblinear)", "C": settings.c, "class_weight": "balanced",
@@ -394,6 +408,11 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
                              "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)},
                              "seconds": round(time.perf_counter() - t0, 1), "trained_at": _now()})
     return model
+
+
+def synthetic_yaw(seed: int) -> float:
+    """The yaw (degrees) of generated training building ``seed``: seeded, so that frames are exercised."""
+    return float(np.random.default_rng([int(seed), 7]).uniform(0.0, 90.0))
 
 
 def _now() -> str:

@@ -437,3 +437,16 @@ def evaluate_points(store: Any, *, client=None, predicted: str = "classification
     mats = run_tasks(tile_confusion, store.tiles, client=client, label="point confusion",
                      keys=[t.name for t in store.tiles], extra_args=(store, predicted, truth))
     return PointEvaluation(np.sum(mats, axis=0) if mats else np.zeros((N_CLASSES, N_CLASSES), np.int64))
+
+
+def format_ap_table(results: Sequence[dict[str, Any]], names: Sequence[str] | None = None) -> str:
+    """A Table-3-style text table (AP in %) of :meth:`DetectionEvaluation.to_json` results, one row each."""
+    cols = list(STRUCTURAL_CLASSES) + ["struct."] + list(FURNITURE_CLASSES) + ["furn.", "mAP"]
+    names = list(names) if names is not None else [r.get("name", "") for r in results]
+    width = max([len(n) for n in names] + [4])
+    lines = [" " * width + "  " + " ".join(f"{c[:8]:>8}" for c in cols)]
+    for name, r in zip(names, results):
+        vals = [r["ap"][c] for c in STRUCTURAL_CLASSES] + [r["structural_mean"]] + \
+               [r["ap"][c] for c in FURNITURE_CLASSES] + [r["furniture_mean"], r["mean_ap"]]
+        lines.append(f"{name:<{width}}  " + " ".join("     n/a" if v != v else f"{100 * v:8.2f}" for v in vals))
+    return "\n".join(lines)

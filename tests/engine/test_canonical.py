@@ -79,12 +79,15 @@ def test_no_opening_falls_back_to_the_longest_wall():
     assert max(opening_widths(f.to_metric(_room(rng, door=None)), np.zeros(3), f.extent)) == 0
 
 
-def test_connection_hint_picks_the_nearest_wall():
+def test_connection_hint_picks_the_nearest_wall_when_no_opening_is_seen():
     rng = np.random.default_rng(3)
-    pts = _room(rng, door=("x-max", 1.0, 2.0))
+    pts = _room(rng, door=None)
     f = estimate_frame(pts, connection=np.array([3.0, 4.2]))  # beyond the y = 4 wall
     assert f.entrance == "neighbour" and f.extent[0] == pytest.approx(6.0, abs=0.03)
     assert f.to_metric(np.array([[3.0, 4.0, 1.0]]))[0, 1] == pytest.approx(0.0, abs=0.03)
+    # a visible doorway wins over the hint
+    g = estimate_frame(_room(rng, door=("x-max", 1.0, 2.0)), connection=np.array([3.0, 4.2]))
+    assert g.entrance == "opening" and g.extent[0] == pytest.approx(4.0, abs=0.03)
 
 
 def test_dominant_yaw_modulo_quarter_turn():

@@ -1,0 +1,105 @@
+"""Detection end to end on generated buildings: train a small model, detect, label points, elements.json."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from engine.cli import main
+from engine.detection import DetectionSettings, detect
+from engine.labels import label_points, read_elements_json, write_elements_json
+from engine.metrics.detection import box_iou_3d, boxes_array, evaluate_detections
+from engine.model import Model, default_model_path
+from engine.synth import generate
+from tiles.classes import CLASS_CODES
+from tiles.store import open_store
+
+STRUCTURE = ("ceiling", "floor", "wall")
+
+
+@pytest.fixture(scope="module")
+def buildings(tmp_path_factory):
+    """Two small generated buildings (different seeds, rotated): one to train on, one to test on."""
+    root = tmp_path_factory.mktemp("det")
+    out = {}
+    for name, seed, yaw in (("train", 11, 20.0), ("test", 12, 63.0)):
+        generate(str(root / f"{name}.zarr"), seed=seed, rooms=3, density=1200, yaw=yaw)
+        out[name] = open_store(str(root / f"{name}.zarr"))
+    return root, out
+
+
+@pytest.fixture(scope="module")
+def trained(buildings, client):
+    """A structural-only model trained with the command line (one mining round)."""
+    root, stores = buildings
+    model = root / "model"
+    rc = main(["train", stores["train"].url, "--model", str(model), "--classes", ",".join(STRUCTURE),
+               "--rounds", "1", "--scheduler", client.scheduler.address])
+    assert rc == 0
+    return Model.load(model)
+
+
+def test_small_model_detects_walls_floor_and_ceiling(buildings, trained, client):
+    _, stores = buildings
+    store = stores["test"]
+    props = detect(store, model=trained, client=client, space_array="gt_space")
+    assert props and {p.class_name for p in props} <= set(STRUCTURE)
+    gt = [e for e in store.doc("ground_truth")["elements"] if e["class"] in STRUCTURE and e.get("points", 1) >= 500]
+    found = {}
+    for e in gt:
+        mine = [p for p in props if p.class_code == e["class_code"]]
+        d = np.array([[*p.center, *p.world_size, p.yaw] for p in mine]).reshape(-1, 7)
+        found.setdefault(e["class"], []).append(float(box_iou_3d(boxes_array([e]), d).max(initial=0.0)))
+    assert all(iou > 0.5 for iou in found["floor"]), found["floor"]
+    assert all(iou > 0.5 for iou in found["ceiling"]), found["ceiling"]
+    assert np.mean(np.array(found["wall"]) > 0.5) >= 0.8, found["wall"]
+    ev = evaluate_detections(props, store.doc("ground_truth")["elements"], client=client)
+    assert ev.ap["floor"] > 0.5 and ev.ap["ceiling"] > 0.5 and ev.ap["wall"] > 0.5
+
+
+def test_labels_and_elements_json(buildings, trained, client, tmp_path):
+    _, stores = buildings
+    store = stores["test"]
+    props = detect(store, model=trained, client=client, space_array="gt_space",
+                   settings=DetectionSettings.from_config(max_per_class=8))
+    labelled = label_points(store, props, client=client)
+    store.refresh()
+    assert store.meta.dimension("classification").kind == "result"
+    cls = np.concatenate([store.read(t, ["classification"])["classification"] for t in store.tiles])
+    gtc = np.concatenate([store.read(t, ["gt_class"])["gt_class"] for t in store.tiles])
+    eid = np.concatenate([store.read(t, ["element_id"])["element_id"] for t in store.tiles])
+    assert cls.dtype == np.uint8 and eid.dtype == np.int32 and labelled == int((cls != 12).sum())
+    assert set(np.unique(cls)) <= {CLASS_CODES[c] for c in STRUCTURE} | {12}
+    assert np.all((eid == -1) == (cls == 12)) and eid.max() < len(props)
+    for c in ("floor", "ceiling"):  # most floor / ceiling points are labelled so
+        assert np.mean(cls[gtc == CLASS_CODES[c]] == CLASS_CODES[c]) > 0.8
+    path = write_elements_json(props, tmp_path / "out" / "elements.json")
+    recs = read_elements_json(path)
+    assert len(recs) == len(props)
+    r = recs[0]
+    assert set(r) >= {"element_id", "class", "class_code", "score", "space_id", "center", "size", "yaw", "voxels"}
+    p = next(q for q in props if q.element_id == r["element_id"])
+    assert np.allclose(r["center"], p.center) and np.allclose(r["size"], p.world_size)
+    # world coordinates: the box centre lies inside the building's bounds
+    b = store.meta.bounds
+    assert b[0] - 0.1 <= r["center"][0] <= b[3] + 0.1 and b[1] - 0.1 <= r["center"][1] <= b[4] + 0.1
+
+
+def test_detect_command(buildings, trained, client, tmp_path, capsys):
+    root, stores = buildings
+    out = tmp_path / "e.json"
+    rc = main(["detect", stores["test"].url, "--model", str(root / "model"), "--out", str(out),
+               "--space-array", "gt_space", "--evaluate", "--scheduler", client.scheduler.address])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "detections" in text and "mAP" in text
+    assert json.loads(out.read_text())
+    # no space_id yet in this store: a clear one-line error
+    assert main(["detect", stores["test"].url, "--model", str(root / "model"), "--out", str(out),
+                 "--scheduler", client.scheduler.address]) == 2
+
+
+def test_default_model_loads():
+    m = Model.load(default_model_path())
+    assert m.trained.sum() >= 10 and len(m.dictionary.atoms_) >= 12
