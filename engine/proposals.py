@@ -63,3 +63,36 @@ def occupied_voxels(occupancy: np.ndarray, size: np.ndarray) -> list[list[float]
     idx = np.argwhere(occ)
     centres = (idx + 0.5) * step - np.asarray(size, dtype=float) / 2
     return [[*map(float, c), *map(float, step)] for c in centres]
+
+
+def proposal_to_json(p: Proposal) -> dict[str, Any]:
+    """A lossless JSON form of a proposal (what a resumed run reads back from the store)."""
+    occ = np.asarray(p.occupancy, dtype=bool)
+    return {"space_id": int(p.space_id), "class_code": int(p.class_code), "score": float(p.score),
+            "position": [float(v) for v in p.position], "size": [float(v) for v in p.size],
+            "occupancy_shape": list(occ.shape), "occupancy": np.flatnonzero(occ.ravel()).tolist(),
+            "center": [float(v) for v in p.center], "world_size": [float(v) for v in p.world_size],
+            "yaw": float(p.yaw), "element_id": int(p.element_id), "extra": _plain(p.extra)}
+
+
+def proposal_from_json(d: dict[str, Any]) -> Proposal:
+    occ = np.zeros(int(np.prod(d["occupancy_shape"])), dtype=bool)
+    occ[np.asarray(d["occupancy"], dtype=np.int64)] = True
+    return Proposal(space_id=int(d["space_id"]), class_code=int(d["class_code"]), score=float(d["score"]),
+                    position=np.asarray(d["position"], dtype=np.float64), size=np.asarray(d["size"], dtype=np.float64),
+                    occupancy=occ.reshape(d["occupancy_shape"]), center=np.asarray(d["center"], dtype=np.float64),
+                    world_size=np.asarray(d["world_size"], dtype=np.float64), yaw=float(d["yaw"]),
+                    element_id=int(d.get("element_id", -1)), extra=dict(d.get("extra", {})))
+
+
+def _plain(x: Any) -> Any:
+    """JSON-able copy of small extra data (numpy scalars and arrays become Python values)."""
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
