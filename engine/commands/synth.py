@@ -35,6 +35,8 @@ examples:
   buildingparser synth big.zarr --area-m2 6000 --seed 3
   buildingparser synth tower.laz --area-m2 2400 --floors 3 --yaw 30 --offset 500000 4100000 30
   buildingparser synth s3dis_like --format s3dis --area-m2 900 --density 2000
+  buildingparser synth hard.zarr --area-m2 900 --floors 2 --hard
+  buildingparser synth glassy.zarr --area-m2 600 --hard glass,registration=0.5
 """
 
 
@@ -64,6 +66,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--png", metavar="FILE", help="also draw the plan (spaces by ground truth, element boxes) "
                                                       "to this PNG")
     parser.add_argument("--overwrite", action="store_true", help="replace OUT (and gt.json) if it exists")
+    parser.add_argument("--hard", nargs="?", const="all", default=None, metavar="LIST",
+                        help="add the difficulties of real scans: all of them (--hard), or some "
+                             "(--hard registration,glass; name=level for a level 0-2); see "
+                             "engine.synth.hardness: registration, glass, unscanned, hidden_walls, wing, oblique, "
+                             "bottlenecks, open_plan, walls, clutter, stairs, artefacts")
     parser.add_argument("--part-points", type=int, metavar="N",
                         help="largest estimated point count of one task; bigger spaces are cut into pieces "
                              "(default: buildingparser.synth.part-points)")
@@ -79,13 +86,13 @@ def run(args: argparse.Namespace) -> int:
 
     fmt = args.format or ("laz" if args.out.lower().endswith((".las", ".laz")) else "store")
     check_parameters(area_m2=args.area_m2, rooms=args.rooms, floors=args.floors, density=args.density, yaw=args.yaw,
-                     offset=args.offset)
+                     offset=args.offset, hardness=args.hard)
     precheck(args.out, fmt, overwrite=args.overwrite, storage_options=args.storage_options)
     with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
         r = generate(args.out, seed=args.seed, area_m2=args.area_m2, rooms=args.rooms, floors=args.floors,
                      density=args.density, yaw=args.yaw, offset=tuple(args.offset), format=fmt, png=args.png,
                      client=client, overwrite=args.overwrite, part_points=args.part_points,
-                     storage_options=args.storage_options)
+                     storage_options=args.storage_options, hardness=args.hard)
     print(f"generated {r['points']:,} points of {r['spaces']} spaces and {r['elements']:,} elements "
           f"({r['floor_area_m2']:,.0f} m2 of floor) into {r['out']} ({r['format']}): "
           f"{r['seconds']:.1f} s, {r['points_per_second']:,.0f} points/s")

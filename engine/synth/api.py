@@ -5,6 +5,7 @@ import math
 import time
 from typing import Any
 
+from engine.synth.hardness import Hardness
 from engine.synth.plan import plan_building
 from engine.synth.writers import precheck, write_las, write_s3dis, write_store
 from tiles import paths
@@ -13,7 +14,8 @@ from tiles import paths
 def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
              density: float | None = None, yaw: float = 0.0, offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
              format: str = "store", png: str | None = None, client=None, overwrite: bool = False,
-             part_points: int | None = None, storage_options: dict[str, Any] | None = None) -> dict[str, Any]:
+             part_points: int | None = None, storage_options: dict[str, Any] | None = None,
+             hardness=None) -> dict[str, Any]:
     """Generate a synthetic building scan with exact ground truth.
 
     Parameters
@@ -31,6 +33,10 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         A ``distributed.Client``; None generates in this process.
     storage_options
         fsspec options when ``out`` is a store URL.
+    hardness
+        Difficulties of real scans (:mod:`engine.synth.hardness`): ``"all"``,
+        ``"registration,glass"``, a list of names, ``{name: level}`` or a
+        :class:`~engine.synth.hardness.Hardness`; None: a clean building.
 
     Returns
     -------
@@ -38,6 +44,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         ``out``, ``format``, ``points``, ``spaces``, ``elements`` (instances with
         points), ``floor_area_m2``, ``parts``, ``seconds``, ``points_per_second``.
     """
+    Hardness.parse(hardness)
     precheck(out, format, overwrite=overwrite, storage_options=storage_options)
     if client is not None:
         from engine.cluster import check_reachable
@@ -45,7 +52,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         check_reachable(client, str(out))
     t0 = time.perf_counter()
     building = plan_building(seed, area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,
-                             offset=offset, part_points=part_points)
+                             offset=offset, part_points=part_points, hardness=hardness)
     if format == "store":
         _, counts = write_store(building, str(out), client=client, overwrite=overwrite,
                                 storage_options=storage_options)
@@ -58,7 +65,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
 
         draw_plan(building, png, counts=counts)
     seconds = time.perf_counter() - t0
-    points = int(sum(counts["spaces"].values()))
+    points = int(counts.get("total", sum(counts["spaces"].values())))
     return {"out": paths.normalize(str(out)), "format": format, "points": points, "spaces": len(building.spaces),
             "elements": sum(1 for n in counts["elements"].values() if n > 0),
             "floor_area_m2": round(building.floor_area, 1), "parts": len(building.parts),

@@ -100,6 +100,9 @@ class Wall:
     openings: list[Opening] = field(default_factory=list)
     ext0: float = 0.0  # how far the wall body reaches past p0 / p1 (into the walls it meets)
     ext1: float = 0.0
+    material: str = "solid"  # or "glass": a glazed partition (hardness ``glass``)
+    glazing: tuple[float, float] = (0.0, 0.0)  # glass from / to this height above the floor (glass walls)
+    lined: tuple[int, ...] = ()  # spaces whose face of this wall is lined by tall furniture (``hidden_walls``)
 
     @property
     def length(self) -> float:
@@ -156,6 +159,9 @@ class Element:
         return CLASS_CODES[self.cls]
 
     def fit_box(self, margin: float) -> None:
+        if not self.prims:  # a volume without surfaces (flying points): its box was set when it was made
+            self.size = np.asarray(self.size, float) + 2 * margin
+            return
         corners = np.concatenate([p.corners() for p in self.prims])
         self.center, size = oriented_bounds(corners, self.yaw)
         self.size = size + 2 * margin
@@ -165,10 +171,22 @@ class Element:
 class Space:
     """A space (room, hallway, ...) of one floor.
 
-    ``cells`` are the centre-line rectangles it was made of, ``footprint`` the
-    clear floor polygon (local xy, counter-clockwise), ``z0``/``z1`` its floor
-    and ceiling heights, ``scanners`` the scan positions; ``density``, ``noise``
-    (sigma, metres) and ``brightness`` vary per space.
+    ``cells`` are the centre-line rectangles it was made of (in the space's own
+    frame, turned by ``axis`` radians from the building's local frame: 0 but in
+    a wing at an angle), ``footprint`` the clear floor polygon (local xy,
+    counter-clockwise), ``z0``/``z1`` its floor and ceiling heights,
+    ``scanners`` the scan positions; ``density``, ``noise`` (sigma, metres) and
+    ``brightness`` vary per space.
+
+    Hard scan conditions (:mod:`engine.synth.hardness`): ``scanned`` False for a
+    room never scanned (no points); ``registration`` ``(tx, ty, tz, angle, px,
+    py)`` the rigid error of its scan (metres, radians about ``(px, py)``) and
+    ``scan_jitter`` ``(k, 4)`` the residual error of each scan position
+    (``tx, ty, tz, angle`` about the position), whose largest displacement is
+    ``jitter_bound``; ``flying`` and ``ghosts`` the rates of flying points and of
+    reflections in ``mirrors`` (window panes, :class:`Rect`) outside
+    ``outline`` (the floor's outer polygon, local xy); ``stairs`` the stair of a
+    stair tower (see :mod:`engine.synth.hard_elements`).
     """
 
     id: int
@@ -189,6 +207,16 @@ class Space:
     walls: list[int] = field(default_factory=list)
     doors: list[int] = field(default_factory=list)
     windows: list[int] = field(default_factory=list)
+    axis: float = 0.0
+    scanned: bool = True
+    registration: tuple[float, ...] | None = None
+    scan_jitter: np.ndarray | None = None
+    jitter_bound: float = 0.0
+    flying: float = 0.0
+    ghosts: float = 0.0
+    mirrors: list[Rect] = field(default_factory=list)
+    outline: np.ndarray | None = None
+    stairs: dict[str, Any] | None = None
 
     @property
     def area(self) -> float:
@@ -200,6 +228,23 @@ class Space:
     def noise_bound(self) -> float:
         """The largest displacement of a point from its surface (noise is clipped at 3 sigma)."""
         return 3.0 * self.noise
+
+    def registered(self, local: np.ndarray) -> np.ndarray:
+        """Local points ``(n, 3)`` moved by the space's registration error (unchanged without one)."""
+        if self.registration is None:
+            return np.asarray(local, float)
+        tx, ty, tz, angle, px, py = self.registration
+        p = np.array(local, float, copy=True)
+        c, s = math.cos(angle), math.sin(angle)
+        x, y = p[..., 0] - px, p[..., 1] - py
+        p[..., 0] = c * x - s * y + px + tx
+        p[..., 1] = s * x + c * y + py + ty
+        p[..., 2] += tz
+        return p
+
+    @property
+    def registration_yaw(self) -> float:
+        return 0.0 if self.registration is None else float(self.registration[3])
 
 
 @dataclass(frozen=True)
@@ -284,22 +329,34 @@ class Building:
         * ``building``: the generation parameters, ``yaw_deg``, ``offset``, ``floor_area_m2``.
 
         Instances: one ``wall`` per edge of a space's clear footprint (a face,
-        as S3DIS annotates walls per room); one ``door`` per side of a door
-        opening; every clutter object is its own instance, so every generated
-        point has ``gt_instance >= 0``.  Boxes contain all of their instance's
-        points (geometry grown by the space's noise bound, 3 sigma + 1 mm).
+        as S3DIS annotates walls per room; the segments of a curved wall are one
+        instance); one ``door`` per side of a door opening; every clutter object
+        is its own instance, so every generated point has ``gt_instance >= 0``
+        except reflections (hardness ``artefacts``: ``gt_space`` and
+        ``gt_instance`` -1, class clutter).  Boxes contain all of their
+        instance's points (geometry grown by the space's noise bound, 3 sigma +
+        1 mm, and by the residual registration error of its scan positions; a
+        registered space's boxes move with its scan).
         ``counts`` is ``{"spaces": {id: n}, "elements": {id: n}}``.
+
+        With hard scan conditions (:mod:`engine.synth.hardness`), also: per
+        space ``scanned`` (False: never scanned, no points), ``axis_deg`` (its
+        own frame: a wing at an angle), ``registration`` (``{"offset": [dx, dy,
+        dz], "yaw_deg", "pivot": [x, y]}`` world, the rigid error of its scan);
+        per wall ``material`` (``solid`` | ``glass``) and ``lined`` (spaces whose
+        face is hidden by tall furniture); ``building.hardness`` (the levels).
         """
         fr = self.frame
+        hard = bool(self.params.get("hardness"))
         spaces, elements = [], []
         for s in self.spaces:
             fp = [[float(x), float(y)] for x, y in fr.xy(s.footprint)]
             spaces.append(GTSpace(s.id, s.name, s.type, s.floor, fp,
                                   [float(s.z0 + fr.offset[2]), float(s.z1 + fr.offset[2])]))
             for e in s.elements:
-                c = fr.xyz(e.center[None])[0]
+                c = fr.xyz(s.registered(e.center[None]))[0]
                 elements.append(GTElement(e.id, e.cls, e.class_code, s.id, [float(v) for v in c],
-                                          [float(v) for v in e.size], float(fr.angle(e.yaw))))
+                                          [float(v) for v in e.size], float(fr.angle(e.yaw + s.registration_yaw))))
         doc = make_doc(spaces, elements)
         for d, s in zip(doc["spaces"], self.spaces):
             d["area"] = round(s.area, 4)
@@ -310,12 +367,21 @@ class Building:
             d["scanners"] = [[float(v) for v in p] for p in fr.xyz(s.scanners)]
             if counts is not None:
                 d["points"] = int(counts["spaces"].get(s.id, 0))
+            if hard:
+                d["scanned"] = bool(s.scanned)
+                d["axis_deg"] = math.degrees(s.axis)
+                if s.registration is not None:
+                    tx, ty, tz, angle, px, py = s.registration
+                    c, sn = math.cos(fr.yaw), math.sin(fr.yaw)
+                    d["registration"] = {"offset": [c * tx - sn * ty, sn * tx + c * ty, tz],
+                                         "yaw_deg": math.degrees(angle),
+                                         "pivot": [float(v) for v in fr.xy(np.array([[px, py]]))[0]]}
         for d, e in zip(doc["elements"], self.elements):
             if e.info:
                 d.update(e.info)
             if counts is not None:
                 d["points"] = int(counts["elements"].get(e.id, 0))
-        doc["walls"] = [self._wall_doc(w) for w in self.walls]
+        doc["walls"] = [self._wall_doc(w, hard) for w in self.walls]
         doc["openings"] = [self._opening_doc(o) for o in self.openings]
         doc["floors"] = [{"index": f.index, "z": f.z + fr.offset[2], "ceiling_max": f.ceiling_max + fr.offset[2],
                           "slab": [v + fr.offset[2] for v in f.slab]} for f in self.floors]
@@ -328,13 +394,17 @@ class Building:
         w = self.walls[o.wall]
         return [s for s in (w.left, w.right) if s >= 0]
 
-    def _wall_doc(self, w: Wall) -> dict[str, Any]:
+    def _wall_doc(self, w: Wall, hard: bool = False) -> dict[str, Any]:
         fr = self.frame
         seg = fr.xy(np.array([w.p0, w.p1]))
-        return {"id": w.id, "floor": w.floor, "kind": w.kind,
-                "segment": [[float(v) for v in p] for p in seg], "thickness": float(w.thickness),
-                "z_range": [float(w.z0 + fr.offset[2]), float(w.z1 + fr.offset[2])],
-                "spaces": [int(w.left), int(w.right)], "openings": [o.id for o in w.openings]}
+        d = {"id": w.id, "floor": w.floor, "kind": w.kind,
+             "segment": [[float(v) for v in p] for p in seg], "thickness": float(w.thickness),
+             "z_range": [float(w.z0 + fr.offset[2]), float(w.z1 + fr.offset[2])],
+             "spaces": [int(w.left), int(w.right)], "openings": [o.id for o in w.openings]}
+        if hard:
+            d["material"] = w.material
+            d["lined"] = [int(v) for v in w.lined]
+        return d
 
     def _opening_doc(self, o: Opening) -> dict[str, Any]:
         fr = self.frame

@@ -159,6 +159,7 @@ class Placer:
 
     def __init__(self, rng: np.random.Generator, space: Space, walls: list[Wall], style: dict):
         self.rng, self.space, self.style = rng, space, style
+        self.hard = None
         self.poly = Polygon(space.footprint)
         shapely.prepare(self.poly)
         lo, hi = space.footprint.min(0), space.footprint.max(0)
@@ -267,13 +268,31 @@ class Placer:
         return None
 
 
-def furnish(rng: np.random.Generator, space: Space, walls: list[Wall], openings: list[Opening], style: dict) -> None:
-    """Put the furniture and clutter of the space's type into ``space.elements``."""
+def furnish(rng: np.random.Generator, space: Space, walls: list[Wall], openings: list[Opening], style: dict,
+            hard=None) -> None:
+    """Put the furniture and clutter of the space's type into ``space.elements``.
+
+    ``hard`` (a :class:`engine.synth.hardness.HardContext`) adds the pieces of
+    the difficulties (:mod:`engine.synth.hard_furniture`): tall cabinets on
+    lined walls and hallway bottlenecks first, cubicles in open-plan offices,
+    piles of boxes last.
+    """
     p = Placer(rng, space, walls, style)
+    p.hard = hard
+    if hard is not None:
+        from engine.synth import hard_furniture
+
+        hard_furniture.before(p, walls, hard)
     _radiators(p, walls)
     {"office": _office, "conferenceRoom": _conference, "hallway": _hallway, "lobby": _lobby,
-     "storage": _storage, "WC": _wc, "openspace": _openspace}[space.type](p)
+     "storage": _storage, "WC": _wc, "openspace": _openspace, "stairs": _stairs}[space.type](p)
     _wall_clutter(p)
+    if hard is not None:
+        hard_furniture.after(p, hard)
+
+
+def _stairs(p: Placer) -> None:
+    """A stair tower holds its stair (:mod:`engine.synth.hard_elements`), no furniture."""
 
 
 def _desk_with_chair(p: Placer, *, free_xy=None, yaw=None, clutter_on=True) -> bool:
@@ -544,12 +563,17 @@ def _openspace(p: Placer) -> None:
         step = step[::-1]
     xs = np.arange(lo[0] + 1.6, hi[0] - 1.2, step[0])
     ys = np.arange(lo[1] + 1.8, hi[1] - 1.2, step[1])
+    pods = p.hard is not None and p.hard.on("open_plan")
     for x in xs:
         for y in ys:
             w, d = rng.uniform(1.2, 1.6), rng.uniform(0.7, 0.8)
             ax = np.array([-math.sin(yaw), math.cos(yaw)])
+            if pods:  # a cubicle pod: low partitions between and beside the two desks
+                from engine.synth.hard_furniture import cubicle
+
+                cubicle(p, np.array([x, y]), yaw, w, d)
             for sgn in (1, -1):
-                xy = np.array([x, y]) + ax * sgn * (d / 2 + 0.01)
+                xy = np.array([x, y]) + ax * sgn * (d / 2 + (0.04 if pods else 0.01))
                 _desk_with_chair(p, free_xy=xy, yaw=yaw + (0 if sgn < 0 else math.pi))
     _bookcases(p, int(rng.integers(1, 4)))
     for _ in range(int(rng.integers(1, 3))):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -35,9 +36,15 @@ class Draft:
     partials: list[tuple[tuple[float, float], tuple[float, float]]] = field(default_factory=list)
     row: int = -1  # index of the row of rooms it came from (-1: hallway, lobby)
     simple: bool = True  # a plain one-cell room that may be split or merged
+    #: Non-rectangular floors (:mod:`engine.synth.shapes`): the centre-line polygon in the floor's frame and
+    #: the angle of the space's own frame, in which ``cells`` (and ``partials``) are then given.
+    poly: Any = None
+    axis: float = 0.0
 
     @property
     def area(self) -> float:
+        if self.poly is not None:
+            return float(self.poly.area)
         return sum((c[2] - c[0]) * (c[3] - c[1]) for c in self.cells)
 
     @property

@@ -23,8 +23,10 @@ import shapely
 from shapely.geometry import Polygon, box
 from shapely.geometry.polygon import orient
 
-from engine.synth import colours, furniture, structure
-from engine.synth.building import Building, FloorInfo, Frame, Opening, PartSpec, Space, Wall
+from engine.synth import colours, furniture, hard_plan, shapes, structure
+from engine.synth.building import Building, Element, FloorInfo, Frame, Opening, PartSpec, Space, Wall
+from engine.synth.hard_elements import stair_scanners
+from engine.synth.hardness import HardContext, Hardness, hard_rng
 from engine.synth.layout import CIRCULATION, Draft, floor_layout
 from tiles.errors import UserError
 
@@ -43,11 +45,12 @@ def rng_for(seed: int, *key: int) -> np.random.Generator:
 
 def check_parameters(*, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
                      density: float | None = None, yaw: float = 0.0,
-                     offset=(0.0, 0.0, 0.0)) -> tuple[float | None, float]:
+                     offset=(0.0, 0.0, 0.0), hardness=None) -> tuple[float | None, float]:
     """Refuse impossible building parameters with a one-line :class:`UserError`; returns area and density.
 
     Cheap: the command line calls it before it starts a cluster.
     """
+    Hardness.parse(hardness)
     floors = int(floors)
     if floors < 1:
         raise UserError(None, f"floors must be at least 1, not {floors}")
@@ -72,7 +75,7 @@ def check_parameters(*, area_m2: float | None = None, rooms: int | None = None, 
 def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
                   density: float | None = None, yaw: float = 0.0,
                   offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                  part_points: int | None = None) -> Building:
+                  part_points: int | None = None, hardness=None) -> Building:
     """Plan a building: spaces with footprints, walls with openings, elements with boxes.
 
     Parameters
@@ -96,9 +99,15 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         World position of the local origin (e.g. UTM ``500000 4100000 30``).
     part_points
         Largest estimated point count of one scan task; a bigger space is cut into pieces.
+    hardness
+        The difficulties of real scans to add (:mod:`engine.synth.hardness`): a
+        :class:`~engine.synth.hardness.Hardness`, ``"all"``, ``"glass,wing"``, a
+        list of names or ``{name: level}``; None: a clean building.
     """
     area_m2, density = check_parameters(area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,
-                                        offset=offset)
+                                        offset=offset, hardness=hardness)
+    h = Hardness.parse(hardness)
+    hard = HardContext(h, int(seed)) if h else None
     floors = int(floors)
     area_given = area_m2 is not None
     if area_m2 is None:
@@ -112,6 +121,13 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     ext_t = round(brng.uniform(0.25, 0.35), 3)
     layouts = _floor_layouts(seed, floors, area_m2, rooms, area_given)
     length, depth = layouts[0].length, layouts[0].depth
+    if h.on("open_plan"):
+        for f, lay in enumerate(layouts):
+            hard_plan.large_open_space(hard_rng(seed, "open_plan", 0, f), lay, h.level("open_plan"))
+    geo = hard_plan.Geometry.plan(int(seed), h, layouts, area_m2 / floors) if h.geometric else None
+    ext_hard = None
+    if h.on("walls") and hard_rng(seed, "walls", 1000).random() < 0.5 * h.level("walls"):
+        ext_hard = round(float(hard_rng(seed, "walls", 1001).uniform(0.4, 0.7)), 3)
 
     spaces: list[Space] = []
     walls: list[Wall] = []
@@ -124,20 +140,49 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         lay = layouts[f]
         base_h = round(frng.uniform(2.7, 3.3), 3)
         first = len(spaces)
-        for d in lay.drafts:
+        fdrafts = geo.floor(f, lay) if geo is not None else lay.drafts
+        for d in fdrafts:
             spaces.append(_new_space(d, len(spaces), f, z, base_h, frng, counters))
-        drafts = {first + i: d for i, d in enumerate(lay.drafts)}
+            if h.on("bottlenecks") and spaces[-1].type == "hallway":
+                lift = hard_rng(seed, "bottlenecks", 0, spaces[-1].id).uniform(0.3, 0.8) * h.level("bottlenecks")
+                spaces[-1].z1 = round(z + min(4.2, base_h + lift), 3)
+        drafts = {first + i: d for i, d in enumerate(fdrafts)}
         _ensure_wc(spaces[first:], counters)
-        floor_walls = _walls(drafts, f, z, spaces, frng, ext_t, len(walls), length, depth)
+        closed: set[int] = set()
+        if h.on("unscanned"):
+            closed = hard_plan.choose_unscanned(hard_rng(seed, "unscanned", f), spaces[first:],
+                                                {sid: d.area for sid, d in drafts.items()}, h.level("unscanned"))
+        if geo is not None:
+            polys = {sid: d.poly for sid, d in drafts.items()}
+            floor_walls = shapes.walls_from_polygons(polys, {sid: d.partials for sid, d in drafts.items()
+                                                             if d.partials}, f, z, spaces, _thickness_draw(frng),
+                                                     ext_t, len(walls))
+        else:
+            floor_walls = _walls(drafts, f, z, spaces, frng, ext_t, len(walls), length, depth)
+        changed = False
+        if h.on("walls"):
+            changed |= hard_plan.thin_and_thick(hard_rng(seed, "walls", f), floor_walls, h.level("walls"), ext_hard)
+        if h.on("glass"):
+            changed |= hard_plan.glass_walls(hard_rng(seed, "glass", f), floor_walls, spaces, h.level("glass"))
+        if changed:
+            (shapes.joint_reach if geo is not None else _joint_reach)(floor_walls)
         walls.extend(floor_walls)
-        _footprints(drafts, floor_walls, spaces)
-        _doors(frng, floor_walls, spaces, openings, drafts, exterior_door=(f == 0))
+        if geo is not None:
+            shapes.clear_footprints(polys, floor_walls, spaces)
+        else:
+            _footprints(drafts, floor_walls, spaces)
+        _doors(frng, floor_walls, spaces, openings, drafts, exterior_door=(f == 0), closed=closed)
         _windows(frng, floor_walls, spaces, openings, style)
-        ceiling_max = max(spaces[i].z1 for i in drafts) - z
+        if h.on("hidden_walls"):
+            hard_plan.line_walls(hard_rng(seed, "hidden_walls", f), floor_walls, spaces, h.level("hidden_walls"))
+        ceiling_max = max(spaces[i].z1 for i in drafts if spaces[i].type != "stairs") - z
         plenum = frng.uniform(0.1, 0.6)
         slab = frng.uniform(0.2, 0.4)
         nxt = round(z + ceiling_max + plenum + slab, 3)
         top = f == floors - 1
+        for sid in drafts:
+            if spaces[sid].type == "stairs":
+                _stair_heights(spaces[sid], floor_walls, spaces, nxt, top, f, slab)
         floor_infos.append(FloorInfo(f, z, z + ceiling_max, (nxt - slab, nxt if not top else nxt - slab)))
         z = nxt
 
@@ -154,15 +199,22 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     for s in spaces:
         srng = rng_for(seed, S_SPACE, s.id)
         colours.space_colours(srng, s, style)
-        structure.add_structure(srng, s, walls, openings, style)
-        furniture.furnish(srng, s, walls, openings, style)
-        structure.place_scanners(srng, s)
+        shapes.in_local_frame(s, walls, lambda lw: structure.add_structure(srng, s, lw, openings, style, hard=hard))
+        shapes.in_local_frame(s, walls, lambda lw: furniture.furnish(srng, s, lw, openings, style, hard=hard))
+        if s.scanned and s.stairs is not None:
+            shapes.in_local_frame(s, walls, lambda lw: stair_scanners(s, hard_rng(seed, "stairs", 1, s.id)))
+        elif s.scanned:
+            shapes.in_local_frame(s, walls, lambda lw: structure.place_scanners(srng, s))
+        else:
+            s.scanners = np.zeros((0, 3))
+    if hard is not None:
+        _hard_spaces(hard, spaces, walls)
     next_id = 0
     for s in spaces:
         for e in s.elements:
             e.id = next_id
             next_id += 1
-            e.fit_box(s.noise_bound + 1e-3)
+            e.fit_box(s.noise_bound + 1e-3 + s.jitter_bound)
         for e in s.elements:
             if e.cls == "door":
                 openings[e.info["opening"]].elements.append(e.id)
@@ -170,9 +222,56 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
                 openings[e.info["opening"]].elements.append(e.id)
     params = {"seed": int(seed), "area_m2": area_m2, "rooms": rooms, "floors": floors, "density": density,
               "part_points": part_points, "generator": "engine.synth"}
+    if h:
+        params["hardness"] = h.to_dict()
     b = Building(int(seed), frame, density, spaces, walls, openings, floor_infos, params=params)
     b.parts = plan_parts(b, part_points)
     return b
+
+
+def _thickness_draw(rng: np.random.Generator):
+    """Interior wall thickness per wall line (0.1-0.22 m; partial walls 0.1-0.15 m), drawn once per line."""
+    drawn: dict = {}
+
+    def draw(key) -> float:
+        if key not in drawn:
+            lo, hi = (0.1, 0.15) if key[0] == "partial" else (0.1, 0.22)
+            drawn[key] = round(float(rng.uniform(lo, hi)), 3)
+        return drawn[key]
+    return draw
+
+
+def _stair_heights(sp: Space, walls: list[Wall], spaces: list[Space], nxt: float, top: bool, floor: int,
+                   slab: float) -> None:
+    """A stair tower's space of one floor reaches the next floor's level (its flight rises through the slab)."""
+    rise = nxt - sp.z0
+    if not top:
+        sp.z1 = nxt
+        for w in walls:
+            if sp.id in (w.left, w.right):
+                w.z1 = max(spaces[s].z1 for s in (w.left, w.right) if s >= 0)
+    sp.stairs = {"rise": round(rise, 3), "top": top, "below": floor > 0, "slab": round(slab, 3)}
+
+
+def _hard_spaces(hard: HardContext, spaces: list[Space], walls: list[Wall]) -> None:
+    """Per-space difficulties that need the whole plan: registration errors, sensor artefacts."""
+    outlines: dict[int, np.ndarray] = {}
+    for s in spaces:
+        if not s.scanned:
+            continue
+        if hard.on("registration"):
+            hard_plan.registration(hard.rng("registration", s.id), s, hard.level("registration"))
+        if hard.on("artefacts"):
+            lvl = hard.level("artefacts")
+            s.flying, s.ghosts = 0.3 * lvl, 0.04 * lvl
+            if s.floor not in outlines:
+                outlines[s.floor] = hard_plan.floor_outline(spaces, walls, s.floor)
+            s.outline = outlines[s.floor]
+            lo, hi = s.footprint.min(0), s.footprint.max(0)
+            centre = np.r_[(lo + hi) / 2, (s.z0 + s.z1) / 2]
+            vol = Element(-1, "clutter", s.id, [], center=centre, size=np.r_[hi - lo, s.z1 - s.z0],
+                          info={"kind": "flying"})
+            s.elements.append(vol)
 
 
 def _floor_layouts(seed: int, floors: int, area_m2: float, rooms: int | None, area_given: bool) -> list:
@@ -203,7 +302,7 @@ def _floor_layouts(seed: int, floors: int, area_m2: float, rooms: int | None, ar
 
 
 def _room_type(rng: np.random.Generator, d: Draft) -> str:
-    if d.type in ("hallway", "lobby", "openspace"):
+    if d.type in ("hallway", "lobby", "openspace", "stairs"):
         return d.type
     area, width = d.area, d.width
     if d.type == "room_small":
@@ -231,7 +330,7 @@ def _new_space(d: Draft, sid: int, floor: int, z: float, base_h: float, rng: np.
         h = min(4.0, base_h + rng.uniform(0.0, 0.5))
     elif rng.random() < 0.2:
         h = base_h - rng.uniform(0.0, 0.1)
-    return Space(sid, f"{t}_{counters[t]}", t, floor, list(d.cells), z0=z, z1=round(z + h, 3))
+    return Space(sid, f"{t}_{counters[t]}", t, floor, list(d.cells), z0=z, z1=round(z + h, 3), axis=d.axis)
 
 
 def _ensure_wc(floor_spaces: list[Space], counters: dict[str, int]) -> None:
@@ -348,8 +447,11 @@ def _door_room(w: Wall, width: float) -> tuple[float, float] | None:
 
 
 def _doors(rng: np.random.Generator, walls: list[Wall], spaces: list[Space], openings: list[Opening],
-           drafts: dict[int, Draft], exterior_door: bool) -> None:
-    """Doors so that every space of the floor is reachable, plus a few extra between rooms."""
+           drafts: dict[int, Draft], exterior_door: bool, closed: set[int] = frozenset()) -> None:
+    """Doors so that every space of the floor is reachable, plus a few extra between rooms.
+
+    The doors of the spaces in ``closed`` (rooms never scanned) are closed.
+    """
     by_pair: dict[tuple[int, int], list[Wall]] = defaultdict(list)
     for w in walls:
         if w.kind == "interior":
@@ -383,6 +485,8 @@ def _doors(rng: np.random.Generator, walls: list[Wall], spaces: list[Space], ope
         if leaf is None:
             r = rng.random()
             leaf = "closed" if r < 0.45 else "open" if r < 0.9 else "none"
+        if closed and (a in closed or b in closed):
+            leaf = "closed"
         # leaves swing into the room, not the hallway
         into = b if a in circ and b not in circ else a if b in circ and a not in circ else pair[rng.integers(2)]
         swing = w.side_of(into)

@@ -72,18 +72,21 @@ COLUMNS = {"x": np.float64, "y": np.float64, "z": np.float64, "red": np.uint16, 
 
 
 def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
-    """Scan one part (see the module docstring)."""
+    """Scan one part (see the module docstring; hard scan conditions: :mod:`engine.synth.hard_scan`)."""
     sp, part = job.space, job.part
+    if not sp.scanned:
+        return {k: np.empty(0, t) for k, t in COLUMNS.items()}
     rng = rng_for(job.seed, S_SCAN, sp.id, part.piece)
     rects, tris = _surfaces(sp, part)
     rate = job.density * sp.density
     pts, nrm, surf = [], [], []
     base, jit, elem = [], [], []
     if rects:
-        p, n, i = _sample_rects(rng, [r for r, _ in rects], rate)
+        p, n, i = _sample_rects(rng, [r for r, _, _ in rects], rate)
         pts.append(p), nrm.append(n), surf.append(i)
-        base.append(np.array([r.rgb for r, _ in rects], float)), jit.append(np.array([r.jitter for r, _ in rects]))
-        elem.append(np.array([e for _, e in rects], np.int64))
+        base.append(np.array([r.rgb for r, _, _ in rects], float))
+        jit.append(np.array([r.jitter for r, _, _ in rects]))
+        elem.append(np.array([e for _, e, _ in rects], np.int64))
     if tris:
         tri = np.concatenate([t[0] for t in tris])
         up = np.concatenate([np.full(len(t[0]), t[1].up) for t in tris])
@@ -102,26 +105,61 @@ def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
     # nearest scanners first: the later ones only test what the earlier ones could not see
     axis_xy = sp.footprint[:, part.axis]
     centre = (max(part.lo, axis_xy.min()) + min(part.hi, axis_xy.max())) / 2
-    scanners = sp.scanners[np.argsort(np.abs(sp.scanners[:, part.axis] - centre), kind="stable")]
-    keep = visible(P, scanners, boxes)
-    P, S = P[keep], S[keep]
+    order = np.argsort(np.abs(sp.scanners[:, part.axis] - centre), kind="stable")
+    scanners = sp.scanners[order]
+    first = seen_by(P, scanners, boxes)
+    keep = first >= 0
+    P, S, first = P[keep], S[keep], first[keep]
     n = len(P)
     sigma = sp.noise
     P += normals[S] * np.clip(rng.standard_normal(n, dtype=np.float32) * sigma, -3 * sigma, 3 * sigma)[:, None]
     dist = np.sqrt(np.sum((P - scanners[0]) ** 2, axis=1))  # light falls off from the part's nearest scanner
     rgb = shade(rng, base[S], jit[S], sp.brightness, dist)
-    world = job.frame.xyz(P)
     el = elem[S]
     ids = np.array([e.id for e in sp.elements], np.int32)
     codes = np.array([e.class_code for e in sp.elements], np.uint8)
+    space = np.full(n, sp.id, np.int32)
+    cls, inst = codes[el], ids[el]
+    if sp.flying > 0 or sp.ghosts > 0 or sp.registration is not None:
+        P, rgb, space, cls, inst, first = _hard(job, P, S, first, rects, scanners, order, rgb, space, cls, inst)
+    world = job.frame.xyz(P)
     return {"x": world[:, 0], "y": world[:, 1], "z": world[:, 2],
             "red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2],
-            "gt_space": np.full(n, sp.id, np.int32), "gt_class": codes[el], "gt_instance": ids[el]}
+            "gt_space": space, "gt_class": cls, "gt_instance": inst}
+
+
+def _hard(job: ScanJob, P, S, first, rects, scanners, order, rgb, space, cls, inst):
+    """Flying points, reflections and registration errors (:mod:`engine.synth.hard_scan`)."""
+    from engine.synth import hard_scan
+    from engine.synth.hardness import hard_rng
+
+    sp = job.space
+    if sp.flying > 0:
+        frng = hard_rng(job.seed, "artefacts", 0, sp.id, job.part.piece)
+        faces = np.array([f for _, _, f in rects], bool)
+        moved = hard_scan.flying_points(frng, sp, P, S, [r for r, _, _ in rects], faces, scanners[first])
+        k = next(i for i, e in enumerate(sp.elements) if e.info.get("kind") == "flying")
+        cls[moved], inst[moved] = sp.elements[k].class_code, sp.elements[k].id
+    if sp.ghosts > 0:
+        grng = hard_rng(job.seed, "artefacts", 1, sp.id, job.part.piece)
+        src, G = hard_scan.reflections(grng, sp, P, scanners[0])
+        if len(src):
+            P = np.concatenate([P, G])
+            rgb = np.concatenate([rgb, (rgb[src] * 0.55).astype(rgb.dtype)])
+            space = np.concatenate([space, np.full(len(src), -1, np.int32)])
+            cls = np.concatenate([cls, np.full(len(src), hard_scan.CLUTTER, np.uint8)])
+            inst = np.concatenate([inst, np.full(len(src), -1, np.int32)])
+            first = np.concatenate([first, first[src]])
+    if sp.registration is not None:
+        jitter = sp.scan_jitter[order] if sp.scan_jitter is not None else None
+        P = hard_scan.register(sp, P, first, scanners, jitter)
+    return P, rgb, space, cls, inst, first
 
 
 # -- surfaces of a part ---------------------------------------------------------------------
-def _surfaces(sp: Space, part: PartSpec) -> tuple[list[tuple[Rect, int]], list[tuple[np.ndarray, Poly, int]]]:
-    """Rectangles ``(rect, element index)`` and triangle sets ``(tris (k, 3, 3), poly, element index)`` of the part."""
+def _surfaces(sp: Space, part: PartSpec) -> tuple[list[tuple[Rect, int, bool]], list[tuple[np.ndarray, Poly, int]]]:
+    """Rectangles ``(rect, element index, is a box face)`` and triangle sets ``(tris (k, 3, 3), poly, element
+    index)`` of the part."""
     rects, tris = [], []
     whole = part.pieces == 1
     for ei, e in enumerate(sp.elements):
@@ -129,13 +167,13 @@ def _surfaces(sp: Space, part: PartSpec) -> tuple[list[tuple[Rect, int]], list[t
             if isinstance(prim, Rect):
                 r = prim if whole else _clip_rect(prim, part)
                 if r is not None:
-                    rects.append((r, ei))
+                    rects.append((r, ei, False))
             elif isinstance(prim, Poly):
                 t = _triangles(prim, None if whole else part)
                 if len(t):
                     tris.append((t, prim, ei))
             elif whole or part.lo <= prim.center[part.axis] < part.hi:
-                rects += [(f, ei) for f in prim.faces(sp.z0, sp.z1)]
+                rects += [(f, ei, True) for f in prim.faces(sp.z0, sp.z1)]
     return rects, tris
 
 
@@ -240,22 +278,27 @@ def visible(points: np.ndarray, scanners: np.ndarray, boxes: list[Box]) -> np.nd
     Works in float32 (local coordinates, far below the 2 mm tolerance) on points
     sorted by voxel, so each box's candidate points are a few contiguous runs.
     """
+    return seen_by(points, scanners, boxes) >= 0
+
+
+def seen_by(points: np.ndarray, scanners: np.ndarray, boxes: list[Box]) -> np.ndarray:
+    """Index of the first scanner (in the given order) that sees each point, -1 if none does."""
     n = len(points)
-    vis = np.zeros(n, bool)
+    first = np.full(n, -1, np.int64)
     if n == 0:
-        return vis
+        return first
     if not boxes:
-        vis[:] = True
-        return vis
+        first[:] = 0
+        return first
     B = box_arrays(boxes)
     todo = np.arange(n)
-    for s in np.asarray(scanners, float):
+    for k, s in enumerate(np.asarray(scanners, float)):
         if not len(todo):
             break
         blocked = _blocked(points[todo], s, B)
-        vis[todo[~blocked]] = True
+        first[todo[~blocked]] = k
         todo = todo[blocked]
-    return vis
+    return first
 
 
 def _blocked(p: np.ndarray, s: np.ndarray, B: dict[str, np.ndarray]) -> np.ndarray:

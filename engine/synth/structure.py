@@ -23,12 +23,15 @@ from shapely.geometry import LineString, Point, Polygon
 from engine.synth import colours
 from engine.synth.building import Element, Opening, Space, Wall
 from engine.synth.geometry import Box, Poly, Rect, at, rect
+from engine.synth.hard_elements import stair_elements, stair_slabs
+from engine.synth.hardness import HardContext
 
 UP, DOWN = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])
 CASING_W, CASING_D = 0.07, 0.015
 LEAF_T = 0.04
 FRAME_W, FRAME_D = 0.05, 0.07
 GLASS_INSET = 0.06  # glass plane distance from the outer face
+GLASS_DENSITY = 0.06  # glazed partitions and glass doors return few points
 
 
 def _v3(xy, z: float = 0.0) -> np.ndarray:
@@ -51,7 +54,7 @@ def edge_openings(space: Space, walls: list[Wall], a: np.ndarray, b: np.ndarray)
         if w.kind == "partial" or not w.openings:
             continue
         d, n = w.direction, w.normal
-        if abs(d[0] * e[1] - d[1] * e[0]) > 1e-9:
+        if abs(d[0] * e[1] - d[1] * e[0]) > 1e-6:
             continue
         side = w.side_of(space.id)
         face0 = np.asarray(w.p0) + n * side * w.thickness / 2
@@ -67,22 +70,37 @@ def edge_openings(space: Space, walls: list[Wall], a: np.ndarray, b: np.ndarray)
 
 
 def add_structure(rng: np.random.Generator, space: Space, walls: list[Wall], openings: list[Opening],
-                  style: dict) -> None:
-    """Append the space's structural elements to ``space.elements``."""
+                  style: dict, hard: HardContext | None = None) -> None:
+    """Append the space's structural elements to ``space.elements``.
+
+    ``hard`` (the building's difficulties) adds the grids of columns of open
+    spaces (``open_plan``) and the stair of a stair tower (``stairs``); glazed
+    partitions (``Wall.material == "glass"``) are drawn whenever a wall is one.
+    """
     cols = space.colours
     z0, z1 = space.z0, space.z1
-    # wall faces, one instance per footprint edge
+    # wall faces, one instance per footprint edge (the segments of a curved wall: one instance)
+    faces = []
     for a, b in footprint_edges(space):
         e = b - a
         length = float(np.hypot(*e))
         inward = np.array([-e[1], e[0]]) / length
         holes = [(s0, s1, o.z0 - z0, min(o.z1, z1) - z0) for s0, s1, o in edge_openings(space, walls, a, b)]
+        glass = glazed_parts(space, walls, a, b, holes)
+        holes += [g["hole"] for g in glass]
         r = rect(_v3(a, z0), _v3(e), [0, 0, z1 - z0], _v3(inward), cols["wall"], holes=holes, jitter=5.0)
-        space.elements.append(Element(-1, "wall", space.id, [r], yaw=math.atan2(e[1], e[0])))
+        faces.append(([r] + [p for g in glass for p in g["prims"]], math.atan2(e[1], e[0]), length))
+    for group in _curve_groups(faces):
+        prims = [p for i in group for p in faces[i][0]]
+        yaw = faces[max(group, key=lambda i: faces[i][2])][1]
+        space.elements.append(Element(-1, "wall", space.id, prims, yaw=yaw))
     # floor and ceiling (door thresholds join the floor below)
-    floor = Element(-1, "floor", space.id, [Poly(space.footprint.copy(), z0, True, cols["floor"],
+    floor_xy, ceiling_xy, ceiling_z = space.footprint.copy(), space.footprint.copy(), z1
+    if space.stairs is not None:
+        floor_xy, ceiling_xy, ceiling_z = stair_slabs(space)
+    floor = Element(-1, "floor", space.id, [Poly(floor_xy, z0, True, cols["floor"],
                                                    jitter=cols.get("floor_jitter", 8.0))])
-    ceiling = Element(-1, "ceiling", space.id, [Poly(space.footprint.copy(), z1, False, cols["ceiling"], jitter=4.0)])
+    ceiling = Element(-1, "ceiling", space.id, [Poly(ceiling_xy, ceiling_z, False, cols["ceiling"], jitter=4.0)])
     space.elements += [floor, ceiling]
     for wid in space.walls:
         w = walls[wid]
@@ -97,9 +115,12 @@ def add_structure(rng: np.random.Generator, space: Space, walls: list[Wall], ope
                 floor.prims.append(threshold)
             else:
                 space.elements.append(_window(w, o, side, space, style))
-    _columns(rng, space, walls, style)
-    _beams(rng, space, walls, openings, style)
-    _lights(rng, space, style)
+    _columns(rng, space, walls, style, hard)
+    if space.stairs is not None:
+        stair_elements(space)
+    else:
+        _beams(rng, space, walls, openings, style)
+        _lights(rng, space, style)
     if _non_convex(space):  # an L-shaped room: its walls hide one arm from the other
         for wid in space.walls:
             w = walls[wid]
@@ -109,6 +130,83 @@ def add_structure(rng: np.random.Generator, space: Space, walls: list[Wall], ope
                 space.occluders.append(Box(np.array([c[0], c[1], (w.z0 + w.z1) / 2]),
                                            np.array([w.length + w.ext0 + w.ext1, w.thickness, w.z1 - w.z0]),
                                            w.yaw, (0, 0, 0)))
+
+
+def _curve_groups(faces: list[tuple[list, float, float]], max_turn: float = 35.0) -> list[list[int]]:
+    """Consecutive footprint edges turning by less than ``max_turn`` degrees (a curved wall): one group each."""
+    n = len(faces)
+    if n == 0:
+        return []
+    turn = [abs(math.remainder(faces[(i + 1) % n][1] - faces[i][1], 2 * math.pi)) for i in range(n)]
+    smooth = [math.degrees(t) < max_turn for t in turn]  # edge i continues into edge i + 1
+    groups: list[list[int]] = [[0]]
+    for i in range(1, n):
+        if smooth[i - 1]:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+    if len(groups) > 1 and smooth[n - 1]:
+        groups[0] = groups.pop() + groups[0]
+    return groups
+
+
+def glazed_parts(space: Space, walls: list[Wall], a: np.ndarray, b: np.ndarray,
+                 holes: list[tuple[float, float, float, float]]) -> list[dict]:
+    """The glazed partitions along a footprint edge: their hole in the opaque face and their prims.
+
+    A glass wall's face is sparse glass (6 % of the density) between the
+    glazing heights, with its door openings left out; mullions every 1.0-1.5 m
+    (the same for both faces: from the wall's own start), a bottom rail and a
+    head rail at normal density, each half as deep as the wall (the half on
+    this side).  Below and above the glazing the face stays solid.
+    """
+    e = b - a
+    length = float(np.hypot(*e))
+    if length < 1e-9:
+        return []
+    e = e / length
+    inward = np.array([-e[1], e[0]])
+    z0, z1 = space.z0, space.z1
+    out = []
+    for wid in space.walls:
+        w = walls[wid]
+        if w.material != "glass" or w.kind == "partial":
+            continue
+        d, n = w.direction, w.normal
+        if abs(d[0] * e[1] - d[1] * e[0]) > 1e-6:
+            continue
+        side = w.side_of(space.id)
+        face0 = np.asarray(w.p0) + n * side * w.thickness / 2
+        if abs(float(np.dot(a - face0, n))) > 1e-5:
+            continue
+        q0, q1 = float(np.dot(face0 - a, e)), float(np.dot(face0 + d * w.length - a, e))
+        s0, s1 = max(min(q0, q1), 0.0), min(max(q0, q1), length)
+        if s1 - s0 < 0.05:
+            continue
+        g0, g1 = w.glazing
+        g1 = min(g1, z1 - z0 - 0.02)
+        if g1 - g0 < 0.3:
+            continue
+        glass_holes = [(max(h0, s0) - s0, min(h1, s1) - s0, t0 - g0, t1 - g0) for h0, h1, t0, t1 in holes
+                       if h1 > s0 and h0 < s1]
+        prims: list = [rect(_v3(a + e * s0, z0 + g0), _v3(e * (s1 - s0)), [0, 0, g1 - g0], _v3(inward),
+                            colours.GLASS, holes=glass_holes, jitter=22.0, density=GLASS_DENSITY)]
+        depth = w.thickness / 2
+        frame = space.colours.get("door_frame", (180, 180, 180))
+        yaw = math.atan2(e[1], e[0])
+        pitch = 1.0 + 0.5 * ((wid * 0.6180339887) % 1.0)
+        along = np.arange(pitch, w.length - 0.05, pitch)
+        for t in along:  # positions along the wall -> along this edge
+            s = float(np.dot(np.asarray(w.p0) + d * t + n * side * w.thickness / 2 - a, e))
+            if not s0 + 0.03 < s < s1 - 0.03 or any(h0 - 0.03 < s < h1 + 0.03 for h0, h1, _, _ in holes):
+                continue
+            c = a + e * s - inward * depth / 2
+            prims.append(Box(_v3(c, z0 + (g0 + g1) / 2), np.array([0.05, depth, g1 - g0]), yaw, frame, jitter=5.0))
+        mid = a + e * (s0 + s1) / 2 - inward * depth / 2
+        for zc in (g0 + 0.025, g1 - 0.025):
+            prims.append(Box(_v3(mid, z0 + zc), np.array([s1 - s0, depth, 0.05]), yaw, frame, jitter=5.0))
+        out.append({"hole": (s0, s1, g0, g1), "prims": prims})
+    return out
 
 
 def _non_convex(space: Space) -> bool:
@@ -134,6 +232,9 @@ def _door_side(w: Wall, o: Opening, side: int, space: Space, style: dict) -> tup
     d3, n3 = _v3(d), _v3(n)
     frame_rgb = space.colours["door_frame"]
     leaf_rgb = space.colours["door"]
+    leaf_kw = {}
+    if w.material == "glass":  # glass doors in glazed partitions: sparse like the glass
+        leaf_rgb, leaf_kw = colours.GLASS, {"jitter": 22.0, "density": GLASS_DENSITY}
     prims: list = [
         rect(at(p0, d, n, o.s0, 0, zf), n3 * face, [0, 0, zh - zf], d3, frame_rgb),
         rect(at(p0, d, n, o.s1, 0, zf), n3 * face, [0, 0, zh - zf], -d3, frame_rgb),
@@ -156,14 +257,14 @@ def _door_side(w: Wall, o: Opening, side: int, space: Space, style: dict) -> tup
             if o.leaf == "closed":
                 off_leaf = o.swing * max(t / 2 - 0.01 - LEAF_T / 2, 0.0)
                 c2 = np.asarray(p0) + d * s_h + closed_dir * lw / 2 + n * off_leaf
-                prims.append(Box(_v3(c2, zf + lh / 2), np.array([lw, LEAF_T, lh]), w.yaw, leaf_rgb))
+                prims.append(Box(_v3(c2, zf + lh / 2), np.array([lw, LEAF_T, lh]), w.yaw, leaf_rgb, **leaf_kw))
             elif o.swing == side:
                 th = o.angle
                 ldir = math.cos(th) * closed_dir + math.sin(th) * o.swing * n
                 hinge_pt = np.asarray(p0) + d * s_h + n * o.swing * (t / 2 + 0.01)
                 c2 = hinge_pt + ldir * lw / 2
                 prims.append(Box(_v3(c2, zf + lh / 2), np.array([lw, LEAF_T, lh]),
-                                 math.atan2(ldir[1], ldir[0]), leaf_rgb))
+                                 math.atan2(ldir[1], ldir[0]), leaf_rgb, **leaf_kw))
     threshold = rect(at(p0, d, n, o.s0, 0, zf), d3 * o.width, n3 * face, UP, space.colours["floor"],
                      jitter=space.colours.get("floor_jitter", 8.0))
     return Element(-1, "door", space.id, prims, yaw=w.yaw, info={"opening": o.id}), threshold
@@ -188,6 +289,7 @@ def _window(w: Wall, o: Opening, side: int, space: Space, style: dict) -> Elemen
         rect(at(p0, d, n, o.s0 + FRAME_W, glass, zs + FRAME_W), d3 * (o.width - 2 * FRAME_W),
              [0, 0, zh - zs - 2 * FRAME_W], n3 * side, colours.GLASS, jitter=22.0, density=0.15),
     ]
+    space.mirrors.append(prims[-1])  # the pane: reflections are seen in it (hardness artefacts)
     fo = glass + side * FRAME_D / 2
     h = zh - zs
     bars = [(o.s0 + FRAME_W / 2, (zs + zh) / 2, FRAME_W, h), (o.s1 - FRAME_W / 2, (zs + zh) / 2, FRAME_W, h),
@@ -202,17 +304,28 @@ def _window(w: Wall, o: Opening, side: int, space: Space, style: dict) -> Elemen
     return Element(-1, "window", space.id, prims, yaw=w.yaw, info={"opening": o.id})
 
 
-def _columns(rng: np.random.Generator, space: Space, walls: list[Wall], style: dict) -> None:
-    """Free-standing columns on a grid in big spaces; engaged columns (pilasters) along exterior walls."""
+def _columns(rng: np.random.Generator, space: Space, walls: list[Wall], style: dict,
+             hard: HardContext | None = None) -> None:
+    """Free-standing columns on a grid in big spaces; engaged columns (pilasters) along exterior walls.
+
+    With ``open_plan`` every open space and lobby over 35 m^2 has its grid, of
+    columns 0.4-0.8 m wide.
+    """
     rgb = space.colours["column"]
     poly = Polygon(space.footprint)
-    if space.type in ("openspace", "lobby") and space.area > 35 and rng.random() < (0.9 if space.type == "lobby" else 0.6):
+    grid = hard is not None and hard.on("open_plan")
+    if space.type in ("openspace", "lobby") and space.area > 35 and (
+            rng.random() < (0.9 if space.type == "lobby" else 0.6) or grid):
         inner = poly.buffer(-1.3, join_style="mitre")
         lo, hi = space.footprint.min(0), space.footprint.max(0)
         step = style["grid"]
         nx, ny = max(1, int((hi[0] - lo[0]) // step)), max(1, int((hi[1] - lo[1]) // step))
         a = rng.uniform(0.3, 0.6)
         b = a if rng.random() < 0.7 else rng.uniform(0.3, 0.6)
+        if grid:
+            hr = hard.rng("open_plan", 1, space.id)
+            a = hr.uniform(0.4, 0.8)
+            b = a if hr.random() < 0.7 else hr.uniform(0.4, 0.8)
         for i in range(nx):
             for j in range(ny):
                 x = lo[0] + (hi[0] - lo[0]) * (i + 1) / (nx + 1)

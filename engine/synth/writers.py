@@ -52,9 +52,11 @@ def store_dimensions() -> list[Dimension]:
 
 
 def _stats(cols: dict[str, np.ndarray], job: ScanJob) -> dict[str, Any]:
+    """Point counts of one part: all of them, those of its space (not reflections outside), per element."""
     inst, cnt = np.unique(cols["gt_instance"], return_counts=True)
     return {"part": job.part.part_id, "space": job.space.id, "count": int(len(cols["x"])),
-            "elements": {int(i): int(c) for i, c in zip(inst, cnt)}}
+            "space_count": int(np.count_nonzero(cols["gt_space"] == job.space.id)),
+            "elements": {int(i): int(c) for i, c in zip(inst, cnt) if i >= 0}}
 
 
 def _quantize(cols: dict[str, np.ndarray], scale: list[float], offset: list[float]) -> dict[str, np.ndarray]:
@@ -68,14 +70,15 @@ def _quantize(cols: dict[str, np.ndarray], scale: list[float], offset: list[floa
 
 
 def counts_of(stats: list[dict[str, Any]]) -> dict[str, dict[int, int]]:
-    """Per-space and per-element point counts from the tasks' statistics."""
+    """Per-space and per-element point counts from the tasks' statistics, and the total (reflections outside
+    the building, in no space, included)."""
     spaces: dict[int, int] = defaultdict(int)
     elements: dict[int, int] = defaultdict(int)
     for s in stats:
-        spaces[s["space"]] += s["count"]
+        spaces[s["space"]] += s.get("space_count", s["count"])
         for k, v in s["elements"].items():
             elements[int(k)] += v
-    return {"spaces": dict(spaces), "elements": dict(elements)}
+    return {"spaces": dict(spaces), "elements": dict(elements), "total": int(sum(s["count"] for s in stats))}
 
 
 def source_info(building: Building) -> dict[str, Any]:
@@ -220,6 +223,8 @@ def _s3dis_part(job: ScanJob, folder: str, names: dict[int, str]):
     inst = cols["gt_instance"][order]
     cuts = np.flatnonzero(np.r_[True, inst[1:] != inst[:-1], True])
     for a, b in zip(cuts[:-1], cuts[1:]):
+        if b <= a or inst[a] < 0:
+            continue  # reflections outside the building (hardness artefacts): S3DIS has no "outside"
         sel = order[a:b]
         name = names[int(inst[a])]
         path = os.path.join(room, f"{name}.txt.p{job.part.piece:05d}")

@@ -32,3 +32,17 @@ def test_cli_mistakes_exit_2_with_one_line(tmp_path, capsys):
     assert main(["synth", str(tmp_path / "x.zarr"), "--floors", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "floors must be at least 1" in err[0]
+
+
+def test_cli_hard_adds_the_difficulties_asked_for(tmp_path, client, capsys):
+    from tiles.store import open_store
+
+    out = tmp_path / "h.zarr"
+    assert main(["synth", str(out), "--rooms", "5", "--density", "60", "--hard", "glass,registration=0.5",
+                 "--scheduler", client.scheduler.address]) == 0
+    assert open_store(str(out)).doc("ground_truth")["building"]["hardness"] == {"glass": 1.0, "registration": 0.5}
+    assert main(["synth", str(tmp_path / "all.zarr"), "--rooms", "5", "--density", "40", "--hard",
+                 "--scheduler", client.scheduler.address]) == 0
+    assert len(open_store(str(tmp_path / "all.zarr")).doc("ground_truth")["building"]["hardness"]) == 12
+    assert main(["synth", str(tmp_path / "x.zarr"), "--hard", "glas"]) == 2
+    assert "unknown difficulty" in capsys.readouterr().err

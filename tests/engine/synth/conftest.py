@@ -31,6 +31,17 @@ def tower_scan(tower):
     return scan_building(tower)
 
 
+@pytest.fixture(scope="session")
+def hard():
+    """Two floors, ~500 m^2, with every difficulty of real scans (hardness "all"); ~0.4 M points."""
+    return plan_building(5, area_m2=500, floors=2, density=120, hardness="all")
+
+
+@pytest.fixture(scope="session")
+def hard_scan(hard):
+    return scan_building(hard)
+
+
 def xyz(cols) -> np.ndarray:
     return np.c_[cols["x"], cols["y"], cols["z"]]
 
