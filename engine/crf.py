@@ -52,11 +52,20 @@ Choices made here, beyond the paper's text:
   ``FEASIBLE`` (a limit was reached) keeps the best solution found and warns; no
   solution at all falls back to the unary-only labels and warns.
 
+Besides the kept set, every proposal gets a *contextual score*, the energy its
+keeping adds with the other labels fixed (:func:`flip_margins`, stored in
+``Proposal.extra["crf_margin"]``; positive exactly for the kept ones).  Average
+precision scores a ranked list, and a selection can only lose recall, so the
+benchmark (``benchmarks/bench_crf.py``) reports both: the AP of all proposals
+ranked by this score against the detector's own ranking, and the final set's
+AP, precision and recall against the detector's own decision (score > 0).
+
 Settings: ``buildingparser.crf.*`` (``engine/crf.yaml``).  The weights live in a
 :class:`CRFWeights` (arrays + JSON parameters, never pickle).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -82,6 +91,8 @@ _PAIR_INDEX = np.zeros((N_CLASSES, N_CLASSES), dtype=np.int64)
 for _i, (_a, _b) in enumerate(CLASS_PAIRS):
     _PAIR_INDEX[_a, _b] = _PAIR_INDEX[_b, _a] = _i
 
+#: Key of ``Proposal.extra`` where the CRF leaves each proposal's contextual score (:func:`flip_margins`).
+MARGIN = "crf_margin"
 FORMAT = "buildingparser-crf"
 FORMAT_VERSION = 1
 #: Names of the blocks of one edge feature vector, in order (see the module docstring).
@@ -217,9 +228,15 @@ class CRFWeights:
         return cls.from_arrays(arrays, params)
 
     # -- the detection model's slot ----------------------------------------------------------
-    def store_in(self, model: Any) -> None:
-        """Put these weights in a detection :class:`engine.model.Model` (its ``crf`` / ``crf_arrays`` slot)."""
+    def store_in(self, model: Any, training: dict[str, Any] | None = None) -> None:
+        """Put these weights in a detection :class:`engine.model.Model` (its ``crf`` / ``crf_arrays`` slot).
+
+        ``training`` (JSON-able: data, spaces, S-SVM iterations, errors...) is kept under
+        ``model.crf["training"]`` as the weights' provenance; it is not needed to use them.
+        """
         model.crf = self.params()
+        if training is not None:
+            model.crf["training"] = training
         model.crf_arrays = self.to_arrays()
 
     @classmethod
@@ -554,6 +571,37 @@ def solve_ip(unary: np.ndarray, edges: np.ndarray, pairwise: np.ndarray,
 # -----------------------------------------------------------------------------------------
 # Public API: one space, all spaces
 # -----------------------------------------------------------------------------------------
+def flip_margins(unary: np.ndarray, edges: np.ndarray, pairwise: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Energy gained by keeping each node, the others' labels fixed: ``E(y, y_v=1) - E(y, y_v=0)``.
+
+    At the CRF's optimum it is >= 0 for the kept nodes and <= 0 for the dropped
+    ones (up to the integer rounding), and it ranks proposals by the detector's
+    score *in context*: a duplicate of a kept box is pushed down by its pairwise
+    penalty, a chair next to a kept table is pulled up.  :func:`rescored` turns
+    it into proposal scores.
+    """
+    y = np.asarray(y, dtype=bool)
+    m = np.asarray(unary, dtype=np.float64).copy()
+    if len(edges):
+        np.add.at(m, edges[:, 0], pairwise * y[edges[:, 1]])
+        np.add.at(m, edges[:, 1], pairwise * y[edges[:, 0]])
+    return m
+
+
+def rescored(proposals: list[Proposal]) -> list[Proposal]:
+    """Copies of the proposals with the CRF's contextual score (``extra["crf_margin"]``) as their ``score``.
+
+    For ranking: the average precision of all proposals ranked by this score is
+    the CRF's effect on the ranked list, next to the final set it keeps.
+    """
+    out = []
+    for p in proposals:
+        if MARGIN not in p.extra:
+            raise ValueError("proposal without a CRF margin: run select_elements or apply_crf first")
+        out.append(dataclasses.replace(p, score=float(p.extra[MARGIN]), extra=dict(p.extra)))
+    return out
+
+
 def select_elements(proposals: list[Proposal], weights: CRFWeights, *,
                     settings: CRFSettings | None = None) -> tuple[list[Proposal], dict[str, Any]]:
     """The CRF of one space: the proposals to keep (in their input order) and how the solve went.
@@ -572,16 +620,19 @@ def select_elements(proposals: list[Proposal], weights: CRFWeights, *,
     kept, info
         ``info`` has ``space_id``, ``status``, ``seconds`` (graph + solve), ``solver_seconds``,
         ``nodes``, ``edges``, ``kept``, ``objective`` and ``warning`` (also issued as a Python warning).
+        Every proposal gets its contextual score in ``extra["crf_margin"]`` (:func:`flip_margins`).
     """
-    keep, info = _select(proposals, weights, settings)
+    keep, margin, info = _select(proposals, weights, settings)
     if info["warning"]:
         warnings.warn(info["warning"], RuntimeWarning, stacklevel=2)
+    for p, m in zip(proposals, margin):
+        p.extra[MARGIN] = float(m)
     return [p for p, k in zip(proposals, keep) if k], info
 
 
 def _select(proposals: list[Proposal], weights: CRFWeights,
-            settings: CRFSettings | None) -> tuple[np.ndarray, dict[str, Any]]:
-    """:func:`select_elements` without the warning: a keep mask and the info."""
+            settings: CRFSettings | None) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """:func:`select_elements` without side effects: keep mask, margins, info."""
     if not isinstance(weights, CRFWeights):
         raise TypeError(f"weights must be CRFWeights, not {type(weights).__name__}")
     settings = settings or CRFSettings.from_config()
@@ -591,8 +642,9 @@ def _select(proposals: list[Proposal], weights: CRFWeights,
         raise ValueError(f"select_elements works on one space, got proposals of spaces {space_ids}")
     sid = space_ids[0] if space_ids else None
     if not proposals:
-        return np.zeros(0, dtype=bool), {"space_id": sid, "status": "EMPTY", "seconds": 0.0, "solver_seconds": 0.0,
-                                         "nodes": 0, "edges": 0, "kept": 0, "objective": 0.0, "warning": None}
+        return np.zeros(0, dtype=bool), np.zeros(0), {
+            "space_id": sid, "status": "EMPTY", "seconds": 0.0, "solver_seconds": 0.0, "nodes": 0, "edges": 0,
+            "kept": 0, "objective": 0.0, "warning": None}
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
     y, sinfo = solve_ip(unary, graph.edges, pairwise, settings)
@@ -600,11 +652,12 @@ def _select(proposals: list[Proposal], weights: CRFWeights,
     info = {"space_id": sid, "status": sinfo["status"], "seconds": time.perf_counter() - t0,
             "solver_seconds": sinfo["seconds"], "nodes": graph.n, "edges": graph.m, "kept": int(y.sum()),
             "objective": sinfo["objective"], "warning": warning}
-    return y, info
+    return y, flip_margins(unary, graph.edges, pairwise, y), info
 
 
-def _crf_task(group: list[Proposal], weights: CRFWeights, settings: CRFSettings) -> tuple[np.ndarray, dict[str, Any]]:
-    """One space's task: the keep mask of ``group`` and the info (the driver issues the warnings)."""
+def _crf_task(group: list[Proposal], weights: CRFWeights,
+              settings: CRFSettings) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """One space's task: keep mask and margins of ``group``, and the info (the driver issues the warnings)."""
     return _select(group, weights, settings)
 
 
@@ -626,7 +679,8 @@ def apply_crf(proposals: list[Proposal], weights: CRFWeights, client=None, *,
     Returns
     -------
     kept, report
-        The kept proposals in their input order, and the ``crf`` block of ``metrics.json``:
+        The kept proposals in their input order (every input proposal gets its contextual score in
+        ``extra["crf_margin"]``, :func:`flip_margins`), and the ``crf`` block of ``metrics.json``:
         ``{"spaces", "solve_seconds": {"median", "max"}, "status": {name: count}, "proposals", "kept",
         "per_space": [info, ...]}`` (``solve_seconds`` is graph building + solving, per space).
     """
@@ -645,8 +699,11 @@ def apply_crf(proposals: list[Proposal], weights: CRFWeights, client=None, *,
                         extra_args=(w_arg, settings))
     keep = np.zeros(len(proposals), dtype=bool)
     infos = []
-    for sid, (mask, info) in zip(sids, results):
-        keep[np.asarray(groups[sid])[mask]] = True
+    for sid, (mask, margin, info) in zip(sids, results):
+        idx = np.asarray(groups[sid])
+        keep[idx[mask]] = True
+        for i, m in zip(idx, margin):
+            proposals[i].extra[MARGIN] = float(m)
         infos.append(info)
         if info.get("warning"):
             warnings.warn(info["warning"], RuntimeWarning, stacklevel=2)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from engine.crf import (CLASS_PAIRS, CRFSettings, CRFWeights, apply_crf, build_graph, edge_feature_size,
-                        edge_scale, energies, energy, joint_feature, metrics_block, pair_index, select_elements,
-                        solve_ip)
+                        edge_scale, energies, energy, flip_margins, joint_feature, metrics_block, pair_index,
+                        rescored, select_elements, solve_ip)
 from engine.crf_scenes import make_scenes
 from engine.proposals import Proposal
 from tiles.classes import CLASS_CODES
@@ -261,3 +261,26 @@ def test_apply_crf_on_the_cluster_equals_space_by_space(client):
     assert 0 < len(kept) < len(flat)
     block = metrics_block(report)
     assert set(block) == {"spaces", "solve_seconds", "status", "proposals", "kept"} and block["kept"] == len(kept)
+
+
+def test_margins_agree_with_the_kept_set_and_rank_in_context():
+    a = prop(WALL, [0.00, 0, 0], [0.05, 1, 1], 1.0)
+    b = prop(WALL, [0.01, 0, 0], [0.05, 1, 1], 0.6)
+    c = prop(WALL, [0.95, 0, 0], [0.05, 1, 1], 0.5)
+    kept, _ = select_elements([a, b, c], duplicate_penalty())
+    margins = {id(p): p.extra["crf_margin"] for p in (a, b, c)}
+    assert all((margins[id(p)] > 0) == (p in kept) for p in (a, b, c))
+    # b scores above c but is a duplicate of the kept a: in context it ranks below c
+    assert margins[id(b)] < 0 < margins[id(c)] < margins[id(a)]
+    r = rescored([a, b, c])
+    assert [p.score for p in r] == [margins[id(p)] for p in (a, b, c)] and a.score == 1.0
+    with pytest.raises(ValueError, match="margin"):
+        rescored([prop(WALL, [0, 0, 0], [.1, .1, .1], 1)])
+    rng = np.random.default_rng(3)
+    for _ in range(3):  # at the optimum no single flip gains: kept >= 0, dropped <= 0
+        n = 9
+        edges = np.array([(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < 0.6])
+        u, pw = rng.normal(size=n), rng.normal(size=len(edges))
+        y, _ = solve_ip(u, edges, pw)
+        m = flip_margins(u, edges, pw, y)
+        assert np.all(m[y] >= -1e-5) and np.all(m[~y] <= 1e-5)
