@@ -17,7 +17,8 @@ performance report.
 
     {"input": {"path": str, "points": int},
      "spaces": {"count": int, "ari": float|null, "ari_oversegmented": float|null,
-                "ari_before_update": float|null, "cells": int},
+                "ari_before_update": float|null, "cells": int,
+                "count_before_update": int},                         # the last one optional
      "detection": {"ap": {class: float}, "map": float, "structural_map": float, "furniture_map": float,
                    "ap_before_crf": {class: float}, "map_before_crf": float,
                    "iou": {class: float}, "miou": float} | null,          # null without ground truth
@@ -31,7 +32,9 @@ two decimals for AP and IoU (as in the paper's tables) and as fractions with
 three decimals for ARI.  Missing values (``null``, NaN: a class without
 ground truth) show as "n/a".  ``crf.status`` names are CP-SAT's (``OPTIMAL``,
 ``FEASIBLE``...) plus ``TRIVIAL`` (no edge left) and ``EMPTY`` (no proposal),
-see :mod:`engine.crf`.  ``crf.proposals`` / ``crf.kept`` (optional) count the
+see :mod:`engine.crf`; any other status (``FEASIBLE``: best solution found
+within the limits; ``UNKNOWN``...: the unary-only fallback) is called out under
+the status table.  ``crf.proposals`` / ``crf.kept`` (optional) count the
 proposals before and after the CRF.
 """
 from __future__ import annotations
@@ -48,6 +51,8 @@ from typing import Any
 from tiles.classes import ELEMENT_CLASSES
 
 REPORT = "report.html"
+#: CRF solver statuses of spaces solved exactly (see :mod:`engine.crf`).
+SOLVED = ("OPTIMAL", "TRIVIAL", "EMPTY")
 OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "elements.json", "metrics.json", "dask-report.html")
 
 _CSS = """
@@ -62,6 +67,7 @@ tr.total td{font-weight:600;background:#fafafa}
 img.plan{max-width:100%;border:1px solid #ddd}
 .note{color:#666;font-size:.85rem}
 .wide{overflow-x:auto}
+.warning{color:#a33}
 """
 
 
@@ -113,9 +119,12 @@ def _input_section(m: dict[str, Any]) -> str:
 
 def _spaces_section(m: dict[str, Any]) -> str:
     s = m.get("spaces") or {}
-    rows = [["spaces", fmt_int(s.get("count"))], ["cells (over-segmentation)", fmt_int(s.get("cells"))],
-            ["ARI", fmt_float(s.get("ari"), 3)], ["ARI before the space update", fmt_float(s.get("ari_before_update"), 3)],
-            ["ARI of the over-segmentation", fmt_float(s.get("ari_oversegmented"), 3)]]
+    rows = [["spaces", fmt_int(s.get("count"))]]
+    if "count_before_update" in s:
+        rows.append(["spaces before the space update", fmt_int(s.get("count_before_update"))])
+    rows += [["cells (over-segmentation)", fmt_int(s.get("cells"))], ["ARI", fmt_float(s.get("ari"), 3)],
+             ["ARI before the space update", fmt_float(s.get("ari_before_update"), 3)],
+             ["ARI of the over-segmentation", fmt_float(s.get("ari_oversegmented"), 3)]]
     note = "" if not _missing(s.get("ari")) else '<p class="note">No ground truth: no ARI.</p>'
     return _table("spaces", ["", ""], rows) + note
 
@@ -171,7 +180,16 @@ def _crf_section(m: dict[str, Any]) -> str:
              ["solve seconds per space, max", fmt_float(ss.get("max"), 3)]]
     status = c.get("status") or {}
     srows = [[str(k), fmt_int(v)] for k, v in sorted(status.items())]
-    return _table("crf", ["", ""], rows) + _table("crf-status", ["solver status", "spaces"], srows)
+    out = _table("crf", ["", ""], rows) + _table("crf-status", ["solver status", "spaces"], srows)
+    feasible = int(status.get("FEASIBLE", 0))
+    failed = int(sum(v for k, v in status.items() if k not in SOLVED and k != "FEASIBLE"))
+    if feasible or failed:
+        out += ('<p class="note warning">Warning: '
+                + _esc(f"{feasible + failed} space(s) not solved to optimality within the solver's limits "
+                       f"(buildingparser.crf.deterministic-time / time-limit): {feasible} kept the best solution "
+                       f"found (FEASIBLE), {failed} fell back to the detector's own decision (score > 0).")
+                + "</p>")
+    return out
 
 
 def _elements_section(m: dict[str, Any]) -> str:

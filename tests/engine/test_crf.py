@@ -284,3 +284,41 @@ def test_margins_agree_with_the_kept_set_and_rank_in_context():
         y, _ = solve_ip(u, edges, pw)
         m = flip_margins(u, edges, pw, y)
         assert np.all(m[y] >= -1e-5) and np.all(m[~y] <= 1e-5)
+
+
+def test_solver_runs_with_one_worker_linearization_2_a_fixed_seed_and_limits(monkeypatch):
+    from ortools.sat.python import cp_model
+
+    seen = []
+
+    class Recording(cp_model.CpSolver):
+        def solve(self, model, *args, **kwargs):
+            p = self.parameters
+            seen.append((p.num_workers, p.linearization_level, p.random_seed, p.max_deterministic_time,
+                         p.max_time_in_seconds))
+            return super().solve(model, *args, **kwargs)
+
+    monkeypatch.setattr(cp_model, "CpSolver", Recording)
+    edges = np.array([(0, 1), (1, 2), (0, 2)])
+    y, info = solve_ip(np.array([1.0, 0.5, -0.2]), edges, np.array([-2.0, 0.3, 0.1]))
+    assert info["status"] == "OPTIMAL"
+    assert seen == [(1, 2, 0, 20.0, 30.0)]  # the defaults of engine/crf.yaml
+    solve_ip(np.array([1.0, 0.5, -0.2]), edges, np.array([-2.0, 0.3, 0.1]),
+             CRFSettings(seed=7, linearization_level=0, deterministic_time=3.0, time_limit=4.0))
+    assert seen[-1] == (1, 0, 7, 3.0, 4.0)
+
+
+def test_apply_crf_reports_a_space_not_solved_to_optimality(client):
+    rng = np.random.default_rng(7)
+    hard = random_proposals(rng, 120, classes=12)
+    w = random_weights(rng, scale=1.0, kk=6)
+    easy = [prop(WALL, [0.0, 0, 0], [0.05, 1, 1], 1.0, space=1)]
+    with pytest.warns(RuntimeWarning, match="not solved to optimality|no solution"):
+        kept, report = apply_crf(hard + easy, w, client=client,
+                                 settings=CRFSettings(deterministic_time=1e-6, time_limit=5.0))
+    status = report["status"]
+    assert sum(status.values()) == 2 and status.get("TRIVIAL") == 1
+    assert status.get("FEASIBLE", 0) + status.get("UNKNOWN", 0) == 1
+    bad = [i for i in report["per_space"] if i["status"] != "TRIVIAL"][0]
+    assert bad["warning"] and bad["space_id"] == hard[0].space_id
+    assert easy[0] in kept  # the other space is unaffected

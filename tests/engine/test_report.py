@@ -14,7 +14,8 @@ from tiles.classes import ELEMENT_CLASSES
 
 METRICS = {
     "input": {"path": "/data/<script>alert(1)</script> & co.laz", "points": 1234567},
-    "spaces": {"count": 12, "ari": 0.8765, "ari_oversegmented": 0.5432, "ari_before_update": 0.7012, "cells": 57},
+    "spaces": {"count": 12, "ari": 0.8765, "ari_oversegmented": 0.5432, "ari_before_update": 0.7012, "cells": 57,
+               "count_before_update": 15},
     "detection": {"ap": {c: 0.05 * (i + 1) for i, c in enumerate(ELEMENT_CLASSES)} | {"beam": float("nan")},
                   "map": 0.4567, "structural_map": 0.5, "furniture_map": 0.3976,
                   "ap_before_crf": {c: 0.04 * (i + 1) for i, c in enumerate(ELEMENT_CLASSES)} | {"beam": None},
@@ -99,6 +100,7 @@ def test_report_tables_match_metrics():
     assert num(sp["ARI"][0]) == pytest.approx(0.8765, abs=5e-4)
     assert num(sp["ARI before the space update"][0]) == pytest.approx(0.7012, abs=5e-4)
     assert num(sp["ARI of the over-segmentation"][0]) == pytest.approx(0.5432, abs=5e-4)
+    assert num(sp["spaces before the space update"][0]) == 15
 
     crf = rows(p.tables["crf"])
     assert num(crf["spaces"][0]) == 12 and num(crf["proposals"][0]) == 900 and num(crf["kept"][0]) == 412
@@ -133,6 +135,18 @@ def test_no_ground_truth_and_missing_sections():
     p = parse(page)
     assert "detection" not in p.tables and "No ground truth" in page
     assert rows(p.tables["spaces"])["ARI"][0] == "n/a"
+    assert "spaces before the space update" not in rows(p.tables["spaces"])  # optional: absent, not "n/a"
+    assert "not solved to optimality" not in page  # every space OPTIMAL: no warning
+
+
+def test_spaces_not_solved_to_optimality_are_called_out():
+    m = dict(METRICS, crf=dict(METRICS["crf"], status={"OPTIMAL": 9, "FEASIBLE": 2, "UNKNOWN": 1}))
+    text = " ".join(render_report(m).split())
+    assert "Warning: 3 space(s) not solved to optimality" in text
+    assert "2 kept the best solution found (FEASIBLE), 1 fell back" in text
+    text = " ".join(render_report(dict(METRICS, crf=dict(METRICS["crf"], status={"OPTIMAL": 3, "TRIVIAL": 2,
+                                                                               "EMPTY": 1}))).split())
+    assert "not solved to optimality" not in text
 
 
 def test_write_report_is_self_contained(tmp_path):
