@@ -90,10 +90,7 @@ def _colours(n: int) -> np.ndarray:
 def draw_floorplan(store: TileStore, parse: SpaceParse, path: str | os.PathLike, client: Client | None = None, *,
                    draw_dividers: bool = True, dpi: int = 150) -> str:
     """Draw the floor plan (spaces coloured, dividers drawn, ids written) to a PNG; returns the path."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
     from shapely.geometry import shape as to_shape
 
     raster, lo, pixel = floorplan_raster(store, parse, client=client)
@@ -107,8 +104,8 @@ def draw_floorplan(store: TileStore, parse: SpaceParse, path: str | os.PathLike,
     extent = (lo[0], lo[0] + w * pixel, lo[1], lo[1] + h * pixel)
     aspect = (extent[3] - extent[2]) / max(extent[1] - extent[0], 1e-9)
     width_in = 8.0
-    fig, axes = plt.subplots(n_floors, 1, figsize=(width_in, max(2.5, width_in * aspect) * n_floors + 0.5),
-                             squeeze=False)
+    fig = Figure(figsize=(width_in, max(2.5, width_in * aspect) * n_floors + 0.5))
+    axes = fig.subplots(n_floors, 1, squeeze=False)
     frame = parse.frame
     for f in range(n_floors):
         ax = axes[f, 0]
@@ -138,7 +135,6 @@ def draw_floorplan(store: TileStore, parse: SpaceParse, path: str | os.PathLike,
     path = os.fspath(path)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)
     return path
 
 

@@ -33,6 +33,24 @@ def shared_data() -> pathlib.Path:
     return SHARED_DATA
 
 
+@pytest.fixture(scope="session")
+def structural_model(tmp_path_factory) -> str:
+    """A small ceiling/floor/wall model trained (one mining round) on a tiny generated building: MODEL stem.
+
+    Tests of the whole run use it instead of the shipped model, so that they do
+    not depend on how that one was trained and stay fast.
+    """
+    from engine.cli import main
+    from engine.synth import generate
+
+    root = tmp_path_factory.mktemp("structural-model")
+    generate(str(root / "train.zarr"), seed=22, rooms=3, density=1200, yaw=50.0)
+    rc = main(["train", str(root / "train.zarr"), "--model", str(root / "model"), "--classes",
+               "ceiling,floor,wall", "--rounds", "1", "--workers", "1"])
+    assert rc == 0
+    return str(root / "model")
+
+
 @pytest.fixture(autouse=True)
 def _quiet_progress(monkeypatch):
     """No progress lines in test output unless a test asks for them."""

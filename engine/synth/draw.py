@@ -22,9 +22,6 @@ BOX_COLOURS = {"column": "#444444", "beam": "#888888", "table": "#b5651d", "chai
 def draw_plan(building: Building, path: str, *, counts: dict | None = None, dpi: int = 110) -> str:
     """Write the plan of every floor to ``path`` (PNG); returns the path."""
     import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.lines import Line2D
 
@@ -37,8 +34,11 @@ def draw_plan(building: Building, path: str, *, counts: dict | None = None, dpi:
     per = min(per, 60.0 / max(span))
     w, h = max(4.0, span[0] * per), max(3.0, span[1] * per)
     font = float(np.clip(per * 24, 3.5, 8.0))
-    fig, axes = plt.subplots(len(floors), 1, figsize=(w + 2.5, (h + 0.6) * len(floors) + 0.4), squeeze=False)
-    cmap = plt.get_cmap("tab20")
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) is left alone
+
+    fig = Figure(figsize=(w + 2.5, (h + 0.6) * len(floors) + 0.4))
+    axes = fig.subplots(len(floors), 1, squeeze=False)
+    cmap = matplotlib.colormaps["tab20"]
     for ax, f in zip(axes[:, 0], floors):
         spaces = [s for s in building.spaces if s.floor == f]
         polys = [fr.xy(s.footprint) - origin for s in spaces]
@@ -96,7 +96,6 @@ def draw_plan(building: Building, path: str, *, counts: dict | None = None, dpi:
         fig.savefig(tmp, dpi=dpi)
         os.replace(tmp, path)
     finally:
-        plt.close(fig)
         if os.path.exists(tmp):
             os.remove(tmp)
     return path

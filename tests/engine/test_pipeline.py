@@ -21,16 +21,12 @@ OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "elements.json", "me
 
 
 @pytest.fixture(scope="module")
-def building(tmp_path_factory):
+def building(tmp_path_factory, structural_model):
     """A small LAZ building with ground truth (gt.json beside it), and a structural model trained on another."""
     root = tmp_path_factory.mktemp("pipe")
     laz = root / "building.laz"
     generate(str(laz), seed=21, rooms=4, density=1500, yaw=17.0, format="laz")
-    generate(str(root / "train.zarr"), seed=22, rooms=3, density=1200, yaw=50.0)
-    rc = main(["train", str(root / "train.zarr"), "--model", str(root / "model"), "--classes",
-               "ceiling,floor,wall", "--rounds", "1", "--workers", "1"])
-    assert rc == 0
-    return root, laz, str(root / "model")
+    return root, laz, structural_model
 
 
 @pytest.fixture(scope="module")
