@@ -32,7 +32,8 @@ DATA are tile stores with ground truth (gt_space, gt_instance and
 meta/ground_truth).  --synthetic [N] also generates N buildings (default:
 buildingparser.crf.train.synthetic-buildings) with seeds S, S+1, ... (--seed,
 default buildingparser.crf.train.synthetic-seed); pick seeds that differ from
-the detectors' training seeds ('buildingparser info MODEL' shows them).
+the detectors' training seeds ("provenance" in MODEL.json lists the detectors'
+training data and seeds).
 
 examples:
   buildingparser train --synthetic 6 --seed 1000 --model models/m
