@@ -60,19 +60,20 @@ class DividerParams:
     """Physical parameters (metres) of the divider search along one kind of axis.
 
     The defaults are for walls seen along a horizontal axis: most walls are
-    0.10-0.35 m thick; the stop widths span 0.06-0.80 m to take thin drywall and
-    thick structural or masonry walls too.  See :func:`vertical_params` for slabs.
+    0.10-0.35 m thick; the stop widths span 0.03-0.80 m to take thin drywall (a
+    3-4 cm void between noisy faces) and thick structural or masonry walls too.
+    See :func:`vertical_params` for slabs.
     """
 
     #: Histogram resolution.
-    bin_width: float = 0.02
+    bin_width: float = 0.01
     #: Smallest and largest stop width δ (void thickness) and the number of widths between
     #: them (geometric progression).
-    stop_min: float = 0.06
+    stop_min: float = 0.03
     stop_max: float = 0.80
-    stop_steps: int = 12
+    stop_steps: int = 14
     #: Pass widths c (width of each margin): from a crisp scanned face to a smeared one.
-    pass_widths: tuple[float, ...] = (0.04, 0.08, 0.16, 0.32)
+    pass_widths: tuple[float, ...] = (0.02, 0.04, 0.08, 0.16, 0.32)
     #: The gap may hold at most ``1 - min_contrast`` of the weaker margin's density.
     min_contrast: float = 0.6
     #: The stronger margin stands at least this many room levels above the gap: the void is bounded
@@ -90,7 +91,7 @@ class DividerParams:
     #: Two dividers are never closer than this (non-maximum suppression radius).
     min_spacing: float = 0.5
     #: The gap would hold at least this many points at the weaker margin's density.
-    min_gap_points: float = 20.0
+    min_gap_points: float = 10.0
     #: A run of empty bins at least this long separates what lies on its two sides.
     empty_run: float = 1.0
 
@@ -127,8 +128,8 @@ def vertical_params(**overrides: Any) -> DividerParams:
     A bare slab is 0.15-0.4 m; with a suspended ceiling and the unscanned plenum
     above it the void reaches 1.5 m and more, hence stop widths of 0.10-2.0 m.
     """
-    base = dict(stop_min=0.10, stop_max=2.0, stop_steps=14, pass_widths=(0.04, 0.08, 0.16, 0.32),
-                min_spacing=0.5, empty_run=2.5, max_void_ratio_full=0.35)
+    base = dict(bin_width=0.02, stop_min=0.10, stop_max=2.0, stop_steps=14,
+                pass_widths=(0.04, 0.08, 0.16, 0.32), min_spacing=0.5, empty_run=2.5, max_void_ratio_full=0.35)
     base.update(overrides)
     return DividerParams(**base)
 
@@ -270,7 +271,7 @@ def _evaluate(i, d, c, k, n: int, cs, med, ucs, umed, half: int, p: DividerParam
         limit = np.where(band, p.max_void_ratio, limit)
     weaker = np.minimum(lm, rm)
     r = 0.5 * (lm + rm) - gm  # the paper's two margins, with the gap subtracted
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         contrast = np.where(weaker > 0, 1.0 - gm / weaker, -np.inf)
         ratio = np.where(level > 0, gm / level, np.inf)
         score = np.where(level > 0, r / level, -np.inf)

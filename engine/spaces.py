@@ -80,7 +80,7 @@ VERSION = 1
 class SpaceParams:
     """All parameters of space parsing, physical (metres) or scale-free; see ``engine/spaces.yaml``."""
 
-    bin_width: float = 0.02
+    bin_width: float = 0.01
     z_bin: float = 0.02
     walls: DividerParams = field(default_factory=DividerParams)
     slabs: DividerParams = field(default_factory=vertical_params)

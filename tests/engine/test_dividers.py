@@ -7,7 +7,7 @@ import pytest
 from engine.dividers import (DividerParams, bank_responses, detect_dividers, empty_runs, max_pool,
                              non_maximum_suppression, occupied_extent, vertical_params)
 
-BW = 0.02
+BW = 0.01
 
 
 def room_signal(walls, *, length=21.0, slice_width=5.0, density=300.0, height=2.8, seed=0, faces=True):
@@ -123,10 +123,10 @@ def test_bank_responses_equal_the_convolution_with_the_filter():
 def test_filter_bank_spans_the_documented_widths():
     p = DividerParams()
     bank = p.bank()
-    assert bank[:, 0].min() * BW == pytest.approx(0.06) and bank[:, 0].max() * BW == pytest.approx(0.8)
-    assert sorted(set(bank[:, 1] * BW)) == pytest.approx([0.04, 0.08, 0.16, 0.32])
-    v = vertical_params().bank()
-    assert v[:, 0].max() * BW == pytest.approx(2.0)
+    assert bank[:, 0].min() * BW == pytest.approx(0.03) and bank[:, 0].max() * BW == pytest.approx(0.8)
+    assert sorted(set(bank[:, 1] * BW)) == pytest.approx([0.02, 0.04, 0.08, 0.16, 0.32])
+    v = vertical_params()
+    assert v.bank()[:, 0].max() * v.bin_width == pytest.approx(2.0)
 
 
 def test_non_maximum_suppression_keeps_the_best_within_the_radius():

@@ -43,25 +43,25 @@ def _face_hist(wall: bool, door_fill: float = 0.0, window: int = 100, seed: int 
 
 def test_face_divider_finds_a_wall_with_a_door_across_the_face():
     h, up = _face_hist(True, door_fill=0.6)
-    d = face_divider(h, (0, 200), 1000, 100, DividerParams(), up)
+    d = face_divider(h, (0, 200), 1000, 100, DividerParams(bin_width=BW), up)
     assert d is not None and d["kind"] == "peak-gap-peak"
     assert abs(d["position"] - 1000 * BW) <= 0.05
 
 
 def test_face_divider_finds_none_in_an_open_room_and_none_off_the_face():
     h, up = _face_hist(False)
-    assert face_divider(h, (0, 200), 1000, 100, DividerParams(), up) is None
+    assert face_divider(h, (0, 200), 1000, 100, DividerParams(bin_width=BW), up) is None
     # a wall 1 m from the face is not a divider *across this face*
     h2, up2 = _face_hist(True)
     h2, up2 = np.roll(h2, 50), np.roll(up2, 50)
-    assert face_divider(h2, (0, 200), 1000, 100, DividerParams(), up2) is None
+    assert face_divider(h2, (0, 200), 1000, 100, DividerParams(bin_width=BW), up2) is None
 
 
 def test_face_divider_separates_cells_with_nothing_between_them():
     h, up = _face_hist(False)
     h[60:140] = 0
     up[60:140] = 0
-    d = face_divider(h, (0, 200), 1000, 100, DividerParams(), up)
+    d = face_divider(h, (0, 200), 1000, 100, DividerParams(bin_width=BW), up)
     assert d is not None and d["kind"] == "empty"
 
 

@@ -40,7 +40,7 @@ def test_split_histogram_cuts_at_dividers_and_drops_empty_runs():
     h[239] = h[250] = 5000.0
     h[500:550] = 0.0
     h[:20] = 0.0  # empty margin shorter than empty_run: kept
-    sp = split_histogram(h, 100, DividerParams())
+    sp = split_histogram(h, 100, DividerParams(bin_width=BW))
     starts = [p[0] for p in sp.pieces]
     assert len(sp.pieces) == 3
     assert starts[0] == 100 and abs(starts[1] - 345) <= 1 and starts[2] == 650
@@ -89,7 +89,7 @@ def test_split_positions_follow_the_histogram_origin(lo):
     h = np.full(400, 50.0)
     h[200:210] = 0
     h[199] = h[210] = 4000.0
-    sp = split_histogram(h, lo, DividerParams())
+    sp = split_histogram(h, lo, DividerParams(bin_width=BW))
     assert len(sp.dividers) == 1
     assert sp.dividers[0]["position"] == pytest.approx((lo + 205) * BW, abs=BW)
     assert [p[:2] for p in sp.pieces] == [(lo, lo + sp.dividers[0]["cut"] - lo), (sp.dividers[0]["cut"], lo + 400)]

@@ -87,7 +87,9 @@ def test_a_building_turned_by_30_degrees_gives_the_same_spaces(tmp_path, corrido
     store = write_store(tmp_path / "turned.zarr", transform(xyz, 30.0, (500.0, 300.0, 20.0)), gt, client=client)
     parse = parse_spaces(store, client=client)
     assert len(parse.spaces) == len(corridor[1].spaces)
-    assert sorted(round(s.area_m2) for s in parse.spaces) == sorted(round(s.area_m2) for s in corridor[1].spaces)
+    # the same areas up to a bin or two of each wall (1 cm bins along the turned axes)
+    assert sorted(s.area_m2 for s in parse.spaces) == pytest.approx(sorted(s.area_m2 for s in corridor[1].spaces),
+                                                                   rel=0.02)
     assert distributed_ari(store, client=client) >= 0.95
 
 
