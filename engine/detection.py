@@ -16,8 +16,15 @@ For every space (one task each, its points gathered from the tiles it touches):
    voxel (surfaces seen from one side: walls, floors, ceilings), its extent
    becomes the dense run (bins holding at least 2 % of the peak) around the peak
    of its points' histogram along that axis (``refine-bin`` metres), so that a
-   3 cm wall is not reported as a 10 cm voxel slab; the points are found through
-   a voxel-sorted index, not a search;
+   3 cm wall is not reported as a 10 cm voxel slab.  First the box moves to
+   the surface (:func:`surface_shift`): when the peak of the histogram of the box
+   grown along that axis as NMS grew it (to ``nms-min-size``) lies outside the
+   box and is at least twice as dense as any bin inside it (a plane), the box
+   moves by whole voxels to hold it.  The windows NMS merged into
+   this detection lie there, and the best-scoring one may be the layer beside
+   the surface: under a ceiling crossed by beams, the layer of the beams' sides,
+   the ceiling one voxel above.  The points are found through a voxel-sorted
+   index, not a search;
 6. the proposals, mapped back to world coordinates through the frame
    (:class:`engine.proposals.Proposal`: unit-cube P, S, B plus the world box).
 
@@ -129,6 +136,31 @@ def refine_extent(values: np.ndarray, lo: float, hi: float, bin_size: float, fra
     return lo + a * bin_size, min(lo + (b + 1) * bin_size, hi)
 
 
+def surface_shift(values: np.ndarray, lo: int, hi: int, search_lo: int, search_hi: int, voxel: float,
+                  bin_size: float, min_gain: float = 2.0) -> int:
+    """Voxels to move a thin box ``[lo, hi)`` along one axis so that it holds the surface beside it.
+
+    ``values`` are the coordinates (metres) along that axis of the points in
+    ``[search_lo, search_hi)`` voxels.  The surface is the peak of their histogram
+    (``bin_size`` metres) when it lies outside ``[lo, hi)`` and holds at least
+    ``min_gain`` times the points of the densest bin inside it (a plane, not the
+    random top of evenly spread points); the box then makes the smallest move that
+    brings the peak's voxel into it.  Otherwise (and without points) 0.
+    """
+    if len(values) == 0:
+        return 0
+    a, b = search_lo * voxel, search_hi * voxel
+    nb = max(int(np.ceil((b - a) / bin_size)), 1)
+    h = np.bincount(np.clip(((values - a) / bin_size).astype(np.int64), 0, nb - 1), minlength=nb)
+    centres = a + (np.arange(nb) + 0.5) * bin_size
+    layer = np.clip(np.floor(centres / voxel).astype(np.int64), search_lo, search_hi - 1)
+    inside = (layer >= lo) & (layer < hi)
+    peak = int(np.argmax(h))
+    if inside[peak] or h[peak] < min_gain * h[inside].max(initial=0):
+        return 0
+    return int(layer[peak] - (hi - 1) if layer[peak] >= hi else layer[peak] - lo)
+
+
 def space_frame(points: SpacePoints, connection: np.ndarray | None = None) -> CanonicalFrame:
     """The canonical frame of a space (store-local coordinates), the same at training and run time."""
     return estimate_frame(points.xyz, connection=connection)
@@ -137,7 +169,7 @@ def space_frame(points: SpacePoints, connection: np.ndarray | None = None) -> Ca
 def prepare_space(points: SpacePoints, model: Model, frame: CanonicalFrame | None = None) -> SpaceVolume:
     """Frame and integral volume of one space for a model's voxel size."""
     frame = frame if frame is not None else space_frame(points)
-    return SpaceVolume.build(points.xyz, points.rgb, frame, model.voxel, model.max_cells)
+    return SpaceVolume.build(points.xyz, points.rgb, frame, model.voxel, model.max_cells, model.layout.colour)
 
 
 def local_search(vol: SpaceVolume, lo: np.ndarray, hi: np.ndarray, scores: np.ndarray, weights: np.ndarray,
@@ -232,14 +264,25 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     vox = grid.voxel
     lo_m, hi_m = lo * vox, hi * vox
     if settings.refine and index is not None:
+        n = np.asarray(grid.shape)
         for i in range(len(lo)):
             # surfaces thinner than half a voxel (walls, floors, ceilings as seen from inside)
             need = atoms[int(at_all_cat[i])].size_in(grid.extent)
             thin = np.nonzero((hi[i] - lo[i] <= settings.thin_voxels) & (need < 0.5 * vox))[0]
-            if not len(thin):
-                continue
-            pts = index.points_in(lo[i], hi[i])
             for a in thin:
+                # the surface is looked for in the box grown along this axis as NMS grew it: the
+                # windows NMS merged into this one lie there, and the best-scoring layer may be the
+                # one beside the surface (under a ceiling crossed by beams: the beams' sides)
+                pad = int(max(np.ceil(settings.nms_min_size / vox[a]) - (hi[i, a] - lo[i, a]), 0) // 2)
+                if pad:
+                    blo, bhi = lo[i].copy(), hi[i].copy()
+                    blo[a], bhi[a] = max(lo[i, a] - pad, 0), min(hi[i, a] + pad, n[a])
+                    shift = surface_shift(index.points_in(blo, bhi)[:, a], int(lo[i, a]), int(hi[i, a]),
+                                          int(blo[a]), int(bhi[a]), vox[a], settings.refine_bin)
+                    lo[i, a] += shift
+                    hi[i, a] += shift
+                    lo_m[i, a], hi_m[i, a] = lo[i, a] * vox[a], hi[i, a] * vox[a]
+                pts = index.points_in(lo[i], hi[i])
                 lo_m[i, a], hi_m[i, a] = refine_extent(pts[:, a], lo_m[i, a], hi_m[i, a], settings.refine_bin)
     return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), np.concatenate(cl_all), at_all_cat)
 

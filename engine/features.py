@@ -18,6 +18,19 @@ vector (:class:`FeatureLayout`) is::
              normal            |n_x|, |n_y|, |n_z| of the smallest eigenvector     (3)
              curvature         lambda_min / sum(lambda) of the covariance of l     (1)
 
+Colours are normalised per space before the moments are summed
+(:func:`normalise_colours`, the layout's ``colour`` mode): the generated
+buildings, like real scans, hold dark rooms and long hallways whose surfaces
+come out at half the brightness of the others, and a detector trained on raw
+colours misses their ceilings (their learned "light grey above" is not there).
+``"space-median"`` scales each space's colours so that the median luminance of
+its points is :data:`COLOUR_TARGET`: a per-space exposure (a multiplicative
+factor) cancels exactly, while the contrast between surfaces stays.  Measured
+on generated buildings (2 quick training buildings, 1 mining round, test seeds
+2000-2001): mAP 25.2 against 20.5 with raw colours (ceiling 28 against 22,
+floor 83 against 79, window 37 against 5).  Models written before this mode
+existed read back as ``"none"`` (raw colours).
+
 The tent codes are our addition: a linear SVM can only score a raw position
 or size monotonically (a wall sits at either end of an axis, a chair has a
 typical size), so each is also given as a piecewise-linear "soft one-hot"
@@ -46,6 +59,10 @@ GLOBAL_BLOCKS = (("position", 3), ("position_code", 3 * len(UNIT_TENTS)), ("size
                  ("size_code", 3 * len(UNIT_TENTS)), ("metric_code", 3 * len(METRIC_TENTS)))
 LOCAL_BLOCKS = (("occupancy", 1), ("ratio", 1), ("color", 3), ("normal", 3), ("curvature", 1))
 LOCAL_SIZE = sum(n for _, n in LOCAL_BLOCKS)
+#: Colour normalisations of a layout: raw colours, or scaled per space to a median luminance.
+COLOUR_MODES = ("none", "space-median")
+#: The median luminance of a space's points after ``"space-median"`` normalisation.
+COLOUR_TARGET = 0.5
 
 #: Feature groups removed by the ablations of paper section 5.3 (Table 3).
 ABLATIONS: dict[str, tuple[str, ...]] = {
@@ -54,6 +71,23 @@ ABLATIONS: dict[str, tuple[str, ...]] = {
     "no_global": ("position", "position_code"),
     "no_color": ("color",),
 }
+
+
+def normalise_colours(rgb: np.ndarray | None, mode: str = "space-median") -> np.ndarray | None:
+    """A space's colours ``(n, 3)`` in [0, 1] normalised as ``mode`` says (see :data:`COLOUR_MODES`).
+
+    ``"space-median"`` multiplies all colours by ``COLOUR_TARGET / median(luminance)``
+    (luminance = mean of r, g, b), so that the same surfaces in a space scanned at
+    any exposure give the same features; values may exceed 1.  A space without
+    colours, or whose median luminance is 0, is returned unchanged.
+    """
+    if mode not in COLOUR_MODES:
+        raise ValueError(f"unknown colour normalisation {mode!r}; known: {COLOUR_MODES}")
+    if rgb is None or mode == "none" or len(rgb) == 0:
+        return rgb
+    rgb = np.asarray(rgb, dtype=np.float64)
+    med = float(np.median(rgb.mean(axis=1)))
+    return rgb * (COLOUR_TARGET / med) if med > 0 else rgb
 
 
 def tent_code(x: np.ndarray, centres) -> np.ndarray:
@@ -80,17 +114,22 @@ class FeatureLayout:
         Feature groups (names of ``GLOBAL_BLOCKS`` / ``LOCAL_BLOCKS``) that are zeroed (ablations).
     min_points
         Points a sub-box needs to count as occupied.
+    colour
+        Colour normalisation of each space before its moments (:data:`COLOUR_MODES`).
     """
 
     k: int = 4
     disabled: tuple[str, ...] = ()
     min_points: int = 1
+    colour: str = "space-median"
     spans: dict[str, list[tuple[int, int]]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if int(self.k) < 1:
             raise ValueError(f"K must be at least 1, got {self.k}")
         self.k = int(self.k)
+        if self.colour not in COLOUR_MODES:
+            raise ValueError(f"unknown colour normalisation {self.colour!r}; known: {COLOUR_MODES}")
         known = {n for n, _ in GLOBAL_BLOCKS} | {n for n, _ in LOCAL_BLOCKS}
         bad = set(self.disabled) - known
         if bad:
@@ -121,14 +160,17 @@ class FeatureLayout:
         return m
 
     def to_json(self) -> dict[str, Any]:
-        return {"k": self.k, "disabled": list(self.disabled), "min_points": self.min_points, "size": self.size,
+        return {"k": self.k, "disabled": list(self.disabled), "min_points": self.min_points, "colour": self.colour,
+                "size": self.size,
                 "global_blocks": [list(b) for b in GLOBAL_BLOCKS], "local_blocks": [list(b) for b in LOCAL_BLOCKS],
                 "unit_tents": list(UNIT_TENTS), "metric_tents": list(METRIC_TENTS),
                 "order": "global blocks, then for each sub-box (x-major: index = (i*K + j)*K + k) its local blocks"}
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> "FeatureLayout":
-        lay = cls(int(d["k"]), tuple(d.get("disabled", ())), int(d.get("min_points", 1)))
+        # models written before colour normalisation existed used raw colours
+        lay = cls(int(d["k"]), tuple(d.get("disabled", ())), int(d.get("min_points", 1)),
+                  str(d.get("colour", "none")))
         if "size" in d and int(d["size"]) != lay.size:
             raise ValueError(f"feature layout of size {d['size']}, this version builds {lay.size}")
         return lay
@@ -219,10 +261,13 @@ class SpaceVolume:
 
     @classmethod
     def build(cls, xyz: np.ndarray, rgb: np.ndarray | None, frame: Any, voxel: float,
-              max_cells: int) -> "SpaceVolume":
-        """Accumulate the moments of a space's points (``xyz`` in the frame's coordinates, ``rgb`` in [0, 1])."""
+              max_cells: int, colour: str = "none") -> "SpaceVolume":
+        """Accumulate the moments of a space's points (``xyz`` in the frame's coordinates, ``rgb`` in [0, 1]).
+
+        ``colour`` normalises the colours first (:func:`normalise_colours`; a model's ``layout.colour``).
+        """
         grid = mom.VoxelGrid.covering(frame.extent, voxel, max_cells)
-        m = mom.voxel_moments(frame.to_metric(xyz), rgb, grid)
+        m = mom.voxel_moments(frame.to_metric(xyz), normalise_colours(rgb, colour), grid)
         return cls(frame, grid, mom.integral_volume(m), int(len(xyz)))
 
     def voxel_box(self, position: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -78,6 +78,7 @@ class TrainSettings:
     iou_weight: float = 0.5
     disabled: tuple[str, ...] = ()
     classes: tuple[int, ...] = tuple(range(N_CLASSES))
+    max_stride: float = 0.5
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
@@ -330,7 +331,9 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
         A callable taking one line of progress, or None.
     """
     settings = settings or TrainSettings.from_config()
-    det = detection or DetectionSettings.from_config()
+    det_run = detection or DetectionSettings.from_config()
+    # mining scans every training space each round: a coarser cap on the stride than at run time
+    det = dataclasses.replace(det_run, max_stride=max(det_run.max_stride, settings.max_stride))
     say = log or (lambda s: None)
     t0 = time.perf_counter()
     jobs = jobs if jobs is not None else training_jobs(stores, client=client)
@@ -399,7 +402,7 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
         active = tuple(c for c in active if trained[c] and (round_ == 0 or new[c] > 0))
         if round_ > 0 and not active:
             break
-    model.detection = det.to_json()
+    model.detection = det_run.to_json()
     model.svm = {"estimator": "sklearn.svm.LinearSVC (liblinear)", "C": settings.c, "class_weight": "balanced",
                  "loss": "squared_hinge", "settings": settings.to_json(), "rounds": history}
     model.provenance = dict(provenance or {})

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.cli import main
-from engine.detection import DetectionSettings, detect
+from engine.detection import DetectionSettings, detect, surface_shift
 from engine.labels import label_points, read_elements_json, write_elements_json
 from engine.metrics.detection import box_iou_3d, boxes_array, evaluate_detections
 from engine.model import Model, default_model_path
@@ -38,6 +38,23 @@ def trained(buildings, client):
                "--rounds", "1", "--scheduler", client.scheduler.address])
     assert rc == 0
     return Model.load(model)
+
+
+def test_surface_shift_moves_a_thin_box_onto_the_surface_beside_it():
+    rng = np.random.default_rng(0)
+    vox, bin_ = 0.1, 0.005
+    # a ceiling at z = 3.03 (voxel 30) over beam sides spread evenly through voxels 26-30
+    ceiling = 3.03 + rng.normal(0, 0.003, 5000)
+    beams = rng.uniform(2.6, 3.03, 2000)
+    values = np.concatenate([ceiling, beams])
+    sel = lambda a, b: values[(values >= a * vox) & (values < b * vox)]  # noqa: E731
+    # the best window was the beams' layer, voxel 29; NMS grew it by one voxel each way
+    assert surface_shift(sel(28, 31), 29, 30, 28, 31, vox, bin_) == 1
+    assert surface_shift(sel(29, 32), 30, 31, 29, 32, vox, bin_) == 0  # already on it
+    assert surface_shift(sel(26, 29), 27, 28, 26, 29, vox, bin_) == 0  # no surface in reach: stays
+    assert surface_shift(sel(29, 32), 31, 32, 29, 32, vox, bin_) == -1  # from above
+    assert surface_shift(sel(27, 31), 28, 30, 27, 31, vox, bin_) == 1  # a box two voxels thick: the smallest move
+    assert surface_shift(np.zeros(0), 3, 4, 2, 5, vox, bin_) == 0
 
 
 def test_small_model_detects_walls_floor_and_ceiling(buildings, trained, client):

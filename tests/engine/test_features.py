@@ -6,7 +6,8 @@ import pytest
 
 from engine import moments as mom
 from engine.canonical import CanonicalFrame
-from engine.features import FeatureLayout, SpaceVolume, global_features, local_features, tent_code, window_features
+from engine.features import (COLOUR_TARGET, FeatureLayout, SpaceVolume, global_features, local_features,
+                             normalise_colours, tent_code, window_features)
 from engine.sliding import axis_positions, non_maximum_suppression, score_windows
 
 
@@ -146,3 +147,38 @@ def test_nms_keeps_best_of_overlapping_boxes():
     hi[3] = [2, 2, 2]
     keep = non_maximum_suppression(lo, hi, np.array([0.5, 0.9, 0.7, 0.1]), 0.3, 10)
     assert keep.tolist() == [1, 2, 3]
+
+
+def test_colour_normalisation_cancels_a_space_exposure_and_keeps_contrast():
+    rng = np.random.default_rng(4)
+    n = 6000
+    # a light ceiling over a dark floor, the same space scanned at full and at half exposure
+    xyz = np.c_[rng.uniform(0, 2, n), rng.uniform(0, 2, n), np.where(np.arange(n) < 4000, 1.95, 0.05)]
+    rgb = np.where((np.arange(n) < 4000)[:, None], [0.9, 0.9, 0.85], [0.3, 0.2, 0.2])
+    rgb = rgb + rng.normal(0, 0.01, (n, 3))
+    lo, hi = np.array([[0, 0, 0]]), np.array([[20, 20, 20]])
+    lay = FeatureLayout(k=2)
+    assert lay.colour == "space-median"
+
+    def colour_block(scale, mode):
+        frame = CanonicalFrame(0.0, [0.0, 0.0, 0.0], (2.0, 2.0, 2.0))
+        vol = SpaceVolume.build(xyz, rgb * scale, frame, 0.1, 10**7, mode)
+        return _local(lay, window_features(vol.iv, vol.grid, lo, hi, lay)[0])[..., 2:5]
+
+    full, half = colour_block(1.0, "space-median"), colour_block(0.5, "space-median")
+    assert np.allclose(full, half)  # the exposure cancels
+    # the median luminance (the ceiling's, 4000 of 6000 points) becomes the target; the floor stays darker
+    assert full[:, :, 1].mean() == pytest.approx(COLOUR_TARGET, rel=0.02)
+    assert full[:, :, 0].mean() < 0.5 * full[:, :, 1].mean()
+    raw_full, raw_half = colour_block(1.0, "none"), colour_block(0.5, "none")
+    assert np.allclose(raw_half, 0.5 * raw_full) and not np.allclose(raw_full, raw_half, atol=0.1)
+    assert normalise_colours(None) is None
+    with pytest.raises(ValueError, match="colour"):
+        FeatureLayout(k=2, colour="gamma")
+
+
+def test_layout_colour_mode_round_trips_and_old_models_read_as_raw():
+    lay = FeatureLayout(k=2)
+    assert FeatureLayout.from_json(lay.to_json()).colour == "space-median"
+    old = {k: v for k, v in lay.to_json().items() if k != "colour"}  # written before the mode existed
+    assert FeatureLayout.from_json(old).colour == "none"
