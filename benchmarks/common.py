@@ -13,6 +13,11 @@ from typing import Any
 
 import psutil
 
+# Register the buildingparser.* defaults first: a suite's ``with dask.config.set({'buildingparser...'})``
+# entered before they exist would delete the whole 'buildingparser' section on exit.
+import engine.config  # noqa: F401,E402
+import tiles.config  # noqa: F401,E402
+
 
 class PeakMemory:
     """Samples the resident memory of this process and all its children (dask workers) in a thread.

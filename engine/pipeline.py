@@ -215,10 +215,26 @@ def _compute(input: str, out: str, client, opt: RunOptions, timings: dict[str, f
         metrics = _metrics(store, input, parsed, final, proposals, elements, crf_report, client, has_truth)
     timings["metrics"] = t.seconds
     metrics["timings"], metrics["skipped"] = _all_timings(log, timings)
-    return store, final, elements, metrics
+    return store, final, elements, json_safe(metrics)
 
 
 # -- stages' helpers ---------------------------------------------------------------------------------
+
+def json_safe(x: Any) -> Any:
+    """``x`` with NaN and infinities as None and numpy scalars as Python numbers: strict JSON for other tools.
+
+    (An AP is undefined, NaN, for a class with no ground-truth element; JSON has no NaN.)
+    """
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
+    return x
+
 
 def _all_timings(log: StageLog, timings: dict[str, float]) -> tuple[dict[str, float], list[str]]:
     """Seconds of every stage in order (a skipped stage's from its record) and the names of the skipped ones."""
@@ -434,11 +450,11 @@ def _write_small_outputs(store: TileStore, final, elements, metrics: dict[str, A
     geo = spaces_feature_collection(final, crs)
     stats = space_statistics(geo, element_records(elements, with_voxels=False))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
-        json.dump(add_statistics_to_geojson(geo, stats), f)
+        json.dump(json_safe(add_statistics_to_geojson(geo, stats)), f, allow_nan=False)
     write_elements_json(elements, os.path.join(staging, "elements.json"))
     draw_floorplan(store, final, os.path.join(staging, "floorplan.png"), client=client)
     with open(os.path.join(staging, "metrics.json"), "w") as f:
-        json.dump(metrics, f, indent=1)
+        json.dump(metrics, f, indent=1, allow_nan=False)
     write_report(staging, metrics=metrics, statistics=stats)
 
 

@@ -7,6 +7,9 @@ import pathlib
 
 import pytest
 
+import engine.config  # noqa: F401 - buildingparser.* defaults registered before any test sets one
+import tiles.config  # noqa: F401
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
 SHARED_DATA = SHARED / "data"

@@ -66,7 +66,11 @@ def test_run_writes_every_output_and_keeps_every_point_in_order(building, first_
 
 def test_metrics_score_the_ground_truth_and_match_the_report(first_run):
     out, metrics, _ = first_run
-    disk = json.loads((out / "metrics.json").read_text())
+    def strict(c):
+        raise AssertionError(f"{c} in an output file: not JSON")
+
+    disk = json.loads((out / "metrics.json").read_text(), parse_constant=strict)
+    json.loads((out / "spaces.geojson").read_text(), parse_constant=strict)
     assert disk["spaces"]["count"] == metrics["spaces"]["count"]
     s = metrics["spaces"]
     assert s["ari"] > 0.8 and s["ari"] >= s["ari_oversegmented"]

@@ -1,0 +1,169 @@
+"""The whole run (``buildingparser run``) on a generated building: per-stage speed and memory, scaling, tasks.
+
+For one generated LAZ building with ground truth, the pipeline
+(:func:`engine.pipeline.run`, every stage forced) runs on a LocalCluster of 1
+worker and of 2 workers.  Reported per stage and cluster size: seconds, points/s,
+and the peak resident memory of the whole process tree and of its largest
+process; the task stream of the 2-worker run (tasks per stage, median and
+largest task seconds), so the graph is known to stay far below what one dask
+scheduler handles (~100 k tasks).
+
+Reference, measured in the same run: the bare I/O any tool must do with this
+cloud, i.e. laspy decoding the LAZ and encoding it again with three extra
+dimensions (what ``points.laz`` adds), on one process.  The tracked speed
+figure is the whole run's seconds over that floor (lower is better); the
+2-worker speed-up over 1 worker is tracked too (target >= 1.8), and the run's
+ARI and mAP as quality.
+
+``--quick`` (CI): a ~60 m² building at low density, 2 workers only.
+The large documented run (README, "Performance")::
+
+    python -m benchmarks.bench_run --area 6000 --floors 3 --workers 2 --store
+
+``--store`` generates straight into a tile store (no LAZ round trip, as a
+scan ingested once) and skips the I/O reference.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import shutil
+import tempfile
+import time
+from typing import Any
+
+import numpy as np
+
+from benchmarks import common
+
+QUICK = {"area": 60.0, "density": 1500.0, "floors": 1, "workers": (2,)}
+FULL = {"area": 600.0, "density": None, "floors": 1, "workers": (1, 2)}
+SEED = 41
+TARGET_SPEEDUP = 1.8
+
+
+def _io_floor(laz: str, work: str) -> float:
+    """Seconds for laspy to decode the LAZ and write it back with three extra dimensions."""
+    import laspy
+
+    t = time.perf_counter()
+    las = laspy.read(laz)
+    for name, dtype in (("space_id", np.int32), ("element_id", np.int32), ("result_class", np.uint8)):
+        las.add_extra_dim(laspy.ExtraBytesParams(name=name, type=dtype))
+    las.write(os.path.join(work, "io-floor.laz"))
+    return time.perf_counter() - t
+
+
+def _task_table(stream: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Tasks per function in a dask task stream: count, median and largest duration."""
+    by: dict[str, list[float]] = {}
+    for t in stream:
+        name = str(t.get("key", "")).split("-")[0].strip("('\"")
+        spans = [s for s in t.get("startstops", ()) if s.get("action") == "compute"]
+        by.setdefault(name, []).append(sum(s["stop"] - s["start"] for s in spans))
+    rows = [{"task": k, "count": len(v), "median_s": round(float(np.median(v)), 3), "max_s": round(max(v), 3)}
+            for k, v in by.items()]
+    return sorted(rows, key=lambda r: -r["count"])
+
+
+def measure(source: str, out: str, workers: int, model: str | None) -> dict[str, Any]:
+    """One forced run on a fresh LocalCluster of ``workers`` single-threaded workers."""
+    from distributed import Client, LocalCluster, get_task_stream
+
+    from engine.pipeline import RunOptions, run
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR, memory_limit="8GiB") as cluster, Client(cluster) as client:
+        client.run(lambda: __import__("engine.detection"))  # warm imports on the workers
+        with common.PeakMemory() as mem, get_task_stream(client) as ts:
+            t0 = time.perf_counter()
+            metrics = run(source, out, client=client,
+                          options=RunOptions(model=model, force=True, say=lambda s: None))
+            total = time.perf_counter() - t0
+        stream = ts.data
+    return {"metrics": metrics, "seconds": total, "peak_total": mem.peak_total, "peak_single": mem.peak_single,
+            "tasks": _task_table(stream), "task_count": len(stream)}
+
+
+def run(quick: bool = False, *, area: float | None = None, density: float | None = None, floors: int | None = None,
+        workers: tuple[int, ...] | None = None, model: str | None = None, store: bool = False,
+        keep: str | None = None) -> dict[str, Any]:
+    import dask
+
+    import engine  # noqa: F401 (configuration defaults)
+    from engine.synth import generate
+
+    p = dict(QUICK if quick else FULL)
+    p.update({k: v for k, v in {"area": area, "density": density, "floors": floors, "workers": workers}.items()
+              if v is not None})
+    model = model or os.environ.get("BUILDINGPARSER_BENCH_MODEL") or None
+    dask.config.set({"buildingparser.progress": "never"})
+    work = keep or tempfile.mkdtemp(prefix="bench-run-")
+    os.makedirs(work, exist_ok=True)
+    rows, tasks, runs = [], [], {}
+    try:
+        source = os.path.join(work, "building.zarr" if store else "building.laz")
+        t = time.perf_counter()
+        info = generate(source, seed=SEED, area_m2=p["area"], floors=p["floors"], density=p["density"],
+                        yaw=23.0, format="store" if store else "laz", overwrite=True)
+        gen_s = time.perf_counter() - t
+        n = int(info["points"])
+        io_s = None if store else _io_floor(source, work)
+        for w in p["workers"]:
+            r = measure(source, os.path.join(work, f"out-{w}w"), w, model)
+            runs[w] = r
+            for stage, s in {**r["metrics"]["timings"], "whole run": r["seconds"]}.items():
+                rows.append({"workers": w, "stage": stage, "seconds": round(s, 2),
+                             "points_per_s": round(n / s) if s >= 0.01 else None,
+                             **({"peak_total_mib": common.mib(r["peak_total"]),
+                                 "peak_single_mib": common.mib(r["peak_single"])} if stage == "whole run" else {})})
+            if w == max(p["workers"]):
+                tasks = r["tasks"]
+        best = runs[max(p["workers"])]
+        m = best["metrics"]
+        det = m.get("detection") or {}
+        summary = {"points": n, "area_m2": p["area"], "floors": p["floors"], "generate_s": round(gen_s, 1),
+                   "io_floor_s": None if io_s is None else round(io_s, 2),
+                   "run_vs_io_floor": None if io_s is None else round(best["seconds"] / io_s, 2),
+                   "tasks": best["task_count"], "ari": round(m["spaces"].get("ari") or 0.0, 3),
+                   "map": round(det.get("map", 0.0), 3), "load_average": round(os.getloadavg()[0], 1)}
+        if 1 in runs and 2 in runs:
+            summary["speedup_2_vs_1"] = round(runs[1]["seconds"] / runs[2]["seconds"], 2)
+            summary["target_speedup"] = TARGET_SPEEDUP
+        tracked = {"ari": {"value": summary["ari"], "better": "higher", "kind": "quality"},
+                   "map": {"value": summary["map"], "better": "higher", "kind": "quality"}}
+        if io_s is not None:
+            tracked["run_vs_io_floor"] = {"value": best["seconds"] / io_s, "better": "lower", "kind": "speed"}
+        if "speedup_2_vs_1" in summary:
+            tracked["speedup_2_vs_1"] = {"value": summary["speedup_2_vs_1"], "better": "higher", "kind": "speed"}
+    finally:
+        if not keep:
+            shutil.rmtree(work, ignore_errors=True)
+    return {"name": "run", "rows": rows, "summary": summary, "tasks": tasks, "tracked": tracked}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="a tiny building, 2 workers (CI smoke run)")
+    ap.add_argument("--area", type=float, help="floor area of the generated building, m^2")
+    ap.add_argument("--density", type=float, help="points per m^2 of scanned surface (default: S3DIS-like)")
+    ap.add_argument("--floors", type=int, help="storeys")
+    ap.add_argument("--workers", type=lambda s: tuple(int(x) for x in s.split(",")), help="e.g. 1,2")
+    ap.add_argument("--model", help="detection model (default: the shipped one)")
+    ap.add_argument("--store", action="store_true", help="generate straight into a tile store (no LAZ, no I/O floor)")
+    ap.add_argument("--keep", metavar="DIR", help="work in DIR and keep the building and outputs")
+    ap.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+    a = ap.parse_args()
+    result = run(a.quick, area=a.area, density=a.density, floors=a.floors, workers=a.workers, model=a.model,
+                 store=a.store, keep=a.keep)
+    common.report(result)
+    print(common.format_table(result["tasks"]))
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(result, f, indent=2, default=float)
+
+
+if __name__ == "__main__":
+    main()
