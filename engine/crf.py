@@ -58,7 +58,8 @@ Choices made here, beyond the paper's text:
 
 Besides the kept set, every proposal gets a *contextual score*, the energy its
 keeping adds with the other labels fixed (:func:`flip_margins`, stored in
-``Proposal.extra["crf_margin"]``; positive exactly for the kept ones).  Average
+``Proposal.extra["crf_margin"]``; at the optimum >= 0 for the kept ones and <= 0
+for the dropped ones, up to the integer rounding of the solve).  Average
 precision scores a ranked list, and a selection can only lose recall, so the
 benchmark (``benchmarks/bench_crf.py``) reports both: the AP of all proposals
 ranked by this score against the detector's own ranking, and the final set's
