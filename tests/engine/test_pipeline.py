@@ -203,3 +203,26 @@ def test_killing_a_worker_mid_run_changes_nothing(building, first_run, tmp_path)
     b = _laz_dims(tmp_path / "killed" / "points.laz", "classification", "space_id", "element_id")
     for n in a:
         np.testing.assert_array_equal(a[n], b[n], err_msg=n)
+
+
+def test_run_with_crf_weights_keeps_a_subset_and_scores_the_ranking(building, client, tmp_path):
+    """The default path: a model with CRF weights; the CRF keeps a subset and its ranking is scored too."""
+    import shutil
+
+    _, laz, model = building
+    crf_model = str(tmp_path / "crf-model")
+    for ext in (".npz", ".json"):
+        shutil.copy(model + ext, crf_model + ext)
+    rc = main(["train-crf", crf_model, "--synthetic", "1", "--seed", "9100", "--area", "60", "--density", "1200",
+               "--scheduler", client.scheduler.address])
+    assert rc == 0
+    out = tmp_path / "out"
+    metrics = run(str(laz), str(out), client=client,
+                  options=RunOptions(model=crf_model, say=lambda s: None, export_points=False))
+    det, crf = metrics["detection"], metrics["crf"]
+    assert crf["spaces"] >= 1 and sum(crf["status"].values()) == crf["spaces"]
+    assert crf["kept"] <= crf["proposals"] and sum(metrics["elements"].values()) == crf["kept"]
+    assert det["map_crf_ranked"] is not None and 0.0 <= det["map_crf_ranked"] <= 1.0
+    assert not (out / "points.laz").exists()
+    text = "\n".join(pipeline.summary_lines(metrics, str(out)))
+    assert "contextual score" in text and "points.laz" not in text
