@@ -94,6 +94,10 @@ def test_report_tables_match_metrics():
     assert num(det["mAP"][0]) == pytest.approx(45.67) and num(det["mAP"][1]) == pytest.approx(40.12)
     assert num(det["mAP"][3]) == pytest.approx(55.12)
     assert num(det["furniture mAP"][0]) == pytest.approx(39.76)
+    assert all(det[c][4] == "n/a" for c in ELEMENT_CLASSES)  # no CRF ranking in these metrics
+    ranked = {**METRICS["detection"], "ap_crf_ranked": {c: 0.25 for c in ELEMENT_CLASSES}, "map_crf_ranked": 0.3}
+    det2 = rows(parse(render_report({**METRICS, "detection": ranked})).tables["detection"])
+    assert num(det2["wall"][4]) == pytest.approx(25.0) and num(det2["mAP"][4]) == pytest.approx(30.0)
 
     sp = rows(p.tables["spaces"])
     assert num(sp["spaces"][0]) == 12 and num(sp["cells (over-segmentation)"][0]) == 57
