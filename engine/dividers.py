@@ -43,7 +43,9 @@ out at any point density:
 
 Separately, runs of empty bins at least ``empty_run`` long are *empty voids*:
 nothing at all was scanned there, so they separate whatever lies on each side
-(and trim the ends of a histogram).
+(and trim the ends of a histogram).  :func:`nearly_empty_runs` is the same
+with a tolerance for stray points (flying points, reflections), used across
+the shared faces of merging.
 """
 from __future__ import annotations
 
@@ -94,6 +96,12 @@ class DividerParams:
     min_gap_points: float = 10.0
     #: A run of empty bins at least this long separates what lies on its two sides.
     empty_run: float = 1.0
+    #: Across a shared face (merging only): a run at least ``empty_run`` long whose density, averaged
+    #: over ``empty_smooth`` metres, stays at most this fraction of the scanned side's room level is
+    #: empty too.  A few flying points or reflections in an unscanned stretch then no longer connect
+    #: the two sides (they broke the strict run above).
+    empty_fraction: float = 0.1
+    empty_smooth: float = 0.1
 
     def bank(self) -> np.ndarray:
         """The filter bank as ``(k, 2)`` integer ``(δ, c)`` in bins, δ ≥ 1, c ≥ 1, no duplicates."""
@@ -239,6 +247,34 @@ def empty_runs(hist: np.ndarray, min_bins: int) -> list[tuple[int, int]]:
     edges = np.diff(np.concatenate(([0], empty.astype(np.int8), [0])))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     return [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= min_bins]
+
+
+def nearly_empty_runs(hist: np.ndarray, min_bins: int, level: float, fraction: float, smooth_bins: int
+                      ) -> list[tuple[int, int]]:
+    """Runs ``[a, b)`` at least ``min_bins`` long where the density is at most ``fraction`` of ``level``.
+
+    The density is the mean over ``smooth_bins`` bins, so that a few stray
+    points (flying points, reflections: a real scan's artefacts) in an
+    unscanned stretch do not break it, as they break :func:`empty_runs`.
+
+    Parameters
+    ----------
+    hist
+        Point counts per bin.
+    min_bins
+        Shortest run kept (bins).
+    level
+        The reference density (points per bin): the room level of the scanned side.
+    fraction
+        A bin is nearly empty when its smoothed density is at most ``fraction * level``.
+    smooth_bins
+        Width of the moving mean (bins).
+    """
+    h = np.asarray(hist, dtype=np.float64)
+    if len(h) == 0 or level <= 0:
+        return []
+    mean = ndimage.uniform_filter1d(h, max(int(smooth_bins), 1), mode="nearest")
+    return empty_runs(np.where(mean <= fraction * level, 0, 1), min_bins)
 
 
 def occupied_extent(hist: np.ndarray) -> tuple[int, int] | None:

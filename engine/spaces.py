@@ -10,7 +10,9 @@ into one process; the driver only sums small per-tile results):
    one task per box searched; the upper band above ``upper_band`` metres over
    each storey's floor gets its own histograms;
 4. merging (:mod:`engine.merging`): one pass for all shared faces, one task per
-   face, then components and absorption of weak groups;
+   face, then agglomeration of the cells through the faces without a divider
+   (most open pair of groups first; a leaky face does not chain two rooms) and
+   absorption of weak groups;
 5. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile
    and collecting per-space counts, z ranges and tiles.
 
@@ -34,7 +36,7 @@ rely on::
                                  "divider_kind", "score"}]}]}],
      "unassigned_points", "point_count",
      "stats": {"passes": [{"pass", "searched", "dividers", "boxes", "tiles"}], "cells", "edges",
-               "edges_divided", "absorbed", "dropped", "seconds": {step: seconds}},
+               "edges_divided", "absorbed", "dropped", "merges_refused", "seconds": {step: seconds}},
      "params": {...}}
 
 A face is a piece of a shared face between two cells of the two spaces, along
@@ -99,6 +101,11 @@ class SpaceParams:
     min_space_area: float = 1.0
     min_space_width: float = 0.5
     min_relative_density: float = 0.02
+    #: Merging joins two groups of cells when the faces without a divider between them are at least this
+    #: fraction of the smaller group's boundary (see :func:`engine.merging.agglomerate`) ...
+    min_open_ratio: float = 0.05
+    #: ... and a face to a cell with fewer points per m² than this fraction of the median cell's does not count.
+    min_scanned_density: float = 0.2
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "walls", dataclasses.replace(self.walls, bin_width=self.bin_width))
@@ -112,7 +119,8 @@ class SpaceParams:
 
     @property
     def rules(self) -> MergeRules:
-        return MergeRules(self.min_space_area, self.min_space_width, self.min_relative_density)
+        return MergeRules(self.min_space_area, self.min_space_width, self.min_relative_density,
+                          self.min_open_ratio, self.min_scanned_density)
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "SpaceParams":
@@ -122,7 +130,8 @@ class SpaceParams:
         kw: dict[str, Any] = {}
         for name in ("bin_width", "z_bin", "yaw", "max_levels", "slicing_void_ratio", "slicing_void_ratio_full",
                      "min_storey_height", "upper_band", "merge_window",
-                     "min_face", "min_space_area", "min_space_width", "min_relative_density"):
+                     "min_face", "min_space_area", "min_space_width", "min_relative_density", "min_open_ratio",
+                     "min_scanned_density"):
             if c.get(name) is not None:
                 kw[name] = c[name]
         if c.get("walls"):
@@ -395,6 +404,7 @@ def parse_spaces(store: TileStore, *, client: Client | None = None, params: Spac
     parse.stats = {"passes": passes, "cells": len(cells), "edges": len(edges),
                    "edges_divided": int(sum(e.divider is not None for e in edges)),
                    "absorbed": len(comps.absorbed), "dropped": len(comps.dropped),
+                   "merges_refused": len(comps.refused),
                    "seconds": {k: round(v, 3) for k, v in seconds.items()}}
     parse.stats["seconds"]["total"] = round(time.perf_counter() - t0, 3)
     store.set_doc(DOC, parse.to_doc())

@@ -103,3 +103,59 @@ def test_a_weak_cell_without_neighbours_is_noise():
     comps = merge(cells, [], BW, MergeRules())
     assert comps.labels.tolist() == [0, -1]
     assert len(comps.dropped) == 1
+
+
+def _two_rooms_one_leak():
+    """Room A (10 x 6 m, one cell) beside room B (cells 1: 9 x 6 m, 2: 1 x 6 m) behind a 10 m wall whose
+    divider was found along 9 m and missed along the last 1 m (a leaky face)."""
+    cells = [_cell(0, 10, 0, 6), _cell(0, 9, 6, 12), _cell(9, 10, 6, 12)]
+    edges = [_edge(0, 1, 1, 6, 0, 9, True),
+             _edge(0, 2, 1, 6, 9, 10, False),  # the leak: 1 m of a 32 m boundary
+             _edge(1, 2, 0, 9, 6, 12, False)]  # inside room B: 6 m
+    return cells, edges
+
+
+def test_one_leaky_face_does_not_chain_two_rooms():
+    cells, edges = _two_rooms_one_leak()
+    comps = merge(cells, edges, BW, MergeRules())
+    assert comps.labels.tolist() == [0, 1, 1]  # connected components would give [0, 0, 0]
+    assert comps.refused == [(0, 1)] and not comps.absorbed
+    # the same face as an opening of a room cut in two: a third of the smaller group's boundary joins
+    cells2 = [_cell(0, 10, 0, 6), _cell(0, 9, 6, 12), _cell(9, 10, 6, 12)]
+    edges2 = [_edge(0, 1, 1, 6, 0, 9, False), edges[1], edges[2]]
+    assert merge(cells2, edges2, BW, MergeRules()).labels.tolist() == [0, 0, 0]
+
+
+def test_a_chain_of_leaks_through_a_hallway_stays_apart():
+    # four 5 x 5 m rooms along a 2 m hallway; each wall to the hallway has its divider along 4.4 m and a
+    # leaky 0.6 m piece (3 % of the room's 20 m boundary); the rooms are apart from each other
+    cells = [_cell(5 * i, 5 * i + 5, 0, 5) for i in range(4)] + [_cell(0, 20, 5, 7)]
+    edges = [_edge(i, 4, 1, 5, 5 * i, 5 * i + 4.4, True) for i in range(4)]
+    edges += [_edge(i, 4, 1, 5, 5 * i + 4.4, 5 * i + 5, False) for i in range(4)]
+    edges += [_edge(i, i + 1, 0, 5 * i + 5, 0, 5, True) for i in range(3)]
+    comps = merge(cells, edges, BW, MergeRules())
+    assert comps.labels.tolist() == [0, 1, 2, 3, 4]  # connected components: one space
+    assert len(comps.refused) == 4
+
+
+def test_a_nearly_unscanned_cell_does_not_bridge_two_rooms():
+    # two rooms whose only link is a sparse cell between them (an unscanned strip with flying points)
+    cells = [_cell(0, 5, 0, 5, count=50000), _cell(5, 6, 0, 5, count=40), _cell(6, 11, 0, 5, count=50000)]
+    edges = [_edge(0, 1, 0, 5, 0, 5, False), _edge(1, 2, 0, 6, 0, 5, False)]
+    rules = MergeRules(min_relative_density=0.0)  # keep the strip a space of its own: no absorption
+    assert merge(cells, edges, BW, rules).labels.tolist() == [0, 1, 2]
+    # absorbed as a weak group, it joins ONE of them
+    labels = merge(cells, edges, BW, MergeRules()).labels.tolist()
+    assert labels[0] != labels[2] and labels[1] in (labels[0], labels[2])
+
+
+def test_face_divider_empty_run_tolerates_stray_points():
+    h, up = _face_hist(False)
+    h[60:140] = 0
+    up[60:140] = 0
+    h[[70, 95, 101, 130]] = 1  # flying points in the unscanned stretch
+    d = face_divider(h, (0, 200), 1000, 100, DividerParams(bin_width=BW), up)
+    assert d is not None and d["kind"] == "empty"
+    # a real floor (room level everywhere) is not nearly empty
+    h2, up2 = _face_hist(False)
+    assert face_divider(h2, (0, 200), 1000, 100, DividerParams(bin_width=BW), up2) is None
