@@ -18,7 +18,8 @@ ARI and mAP as quality.
 ``--quick`` (CI): a ~60 m² building at low density, 2 workers only.
 The large documented run (README, "Performance")::
 
-    python -m benchmarks.bench_run --area 6000 --floors 3 --workers 2 --store
+    buildingparser synth large.zarr --area-m2 6000 --floors 3 --seed 3
+    python -m benchmarks.bench_run --source large.zarr --workers 2 --keep large-run --verbose
 
 ``--store`` generates straight into a tile store (no LAZ round trip, as a
 scan ingested once) and skips the I/O reference.
@@ -68,28 +69,78 @@ def _task_table(stream: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return sorted(rows, key=lambda r: -r["count"])
 
 
-def measure(source: str, out: str, workers: int, model: str | None) -> dict[str, Any]:
+#: What the pipeline says when a stage ends, by stage (the first words of its line).
+STAGE_LINES = {"ingest": ("ingest:", "input:"), "spaces": ("spaces:",), "detection": ("detection:",),
+               "crf": ("crf: kept",), "space_update": ("space update:",), "labels": ("labels:",),
+               "export": ("points.laz:",)}
+
+
+class MemoryTrace(common.PeakMemory):
+    """:class:`benchmarks.common.PeakMemory` that also keeps every sample, to split the peak by stage."""
+
+    def __init__(self, interval: float = 0.1):
+        super().__init__(interval)
+        self.samples: list[tuple[float, int, int]] = []
+
+    def _loop(self) -> None:
+        import psutil
+
+        me = psutil.Process(os.getpid())
+        while not self._stop.is_set():
+            rss = []
+            for p in [me, *me.children(recursive=True)]:
+                try:
+                    rss.append(p.memory_info().rss)
+                except psutil.Error:
+                    pass
+            if rss:
+                self.samples.append((time.perf_counter(), sum(rss), max(rss)))
+                self.peak_total, self.peak_single = max(self.peak_total, sum(rss)), max(self.peak_single, max(rss))
+            self._stop.wait(self.interval)
+
+
+def stage_peaks(trace: MemoryTrace, said: list[tuple[float, str]], start: float) -> dict[str, dict[str, float]]:
+    """Peak memory (whole tree, largest process; MiB) between the end of one stage and the end of the next."""
+    out, prev = {}, start
+    for t, line in said:
+        stage = next((k for k, heads in STAGE_LINES.items() if line.startswith(heads)), None)
+        if stage is None or stage in out:
+            continue
+        window = [(tot, one) for ts, tot, one in trace.samples if prev <= ts <= t] or [(0, 0)]
+        out[stage] = {"peak_total_mib": common.mib(max(w[0] for w in window)),
+                      "peak_single_mib": common.mib(max(w[1] for w in window))}
+        prev = t
+    return out
+
+
+def measure(source: str, out: str, workers: int, model: str | None, *, verbose: bool = False) -> dict[str, Any]:
     """One forced run on a fresh LocalCluster of ``workers`` single-threaded workers."""
     from distributed import Client, LocalCluster, get_task_stream
 
     from engine.pipeline import RunOptions, run
 
+    said: list[tuple[float, str]] = []
+
+    def say(line: str) -> None:
+        said.append((time.perf_counter(), line))
+        if verbose:
+            print(line, flush=True)
+
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                       silence_logs=logging.ERROR, memory_limit="8GiB") as cluster, Client(cluster) as client:
         client.run(lambda: __import__("engine.detection"))  # warm imports on the workers
-        with common.PeakMemory() as mem, get_task_stream(client) as ts:
+        with MemoryTrace() as mem, get_task_stream(client) as ts:
             t0 = time.perf_counter()
-            metrics = run(source, out, client=client,
-                          options=RunOptions(model=model, force=True, say=lambda s: None))
+            metrics = run(source, out, client=client, options=RunOptions(model=model, force=True, say=say))
             total = time.perf_counter() - t0
         stream = ts.data
     return {"metrics": metrics, "seconds": total, "peak_total": mem.peak_total, "peak_single": mem.peak_single,
-            "tasks": _task_table(stream), "task_count": len(stream)}
+            "stage_memory": stage_peaks(mem, said, t0), "tasks": _task_table(stream), "task_count": len(stream)}
 
 
 def run(quick: bool = False, *, area: float | None = None, density: float | None = None, floors: int | None = None,
         workers: tuple[int, ...] | None = None, model: str | None = None, store: bool = False,
-        keep: str | None = None) -> dict[str, Any]:
+        keep: str | None = None, source: str | None = None, verbose: bool = False) -> dict[str, Any]:
     import dask
 
     import engine  # noqa: F401 (configuration defaults)
@@ -104,21 +155,30 @@ def run(quick: bool = False, *, area: float | None = None, density: float | None
     os.makedirs(work, exist_ok=True)
     rows, tasks, runs = [], [], {}
     try:
-        source = os.path.join(work, "building.zarr" if store else "building.laz")
         t = time.perf_counter()
-        info = generate(source, seed=SEED, area_m2=p["area"], floors=p["floors"], density=p["density"],
-                        yaw=23.0, format="store" if store else "laz", overwrite=True)
+        if source is None:
+            source = os.path.join(work, "building.zarr" if store else "building.laz")
+            info = generate(source, seed=SEED, area_m2=p["area"], floors=p["floors"], density=p["density"],
+                            yaw=23.0, format="store" if store else "laz", overwrite=True)
+            n = int(info["points"])
+        else:  # an existing store or file
+            from engine.pipeline import is_store
+            from tiles.store import open_store
+
+            store = is_store(source)
+            n = open_store(source).meta.point_count if store else None
         gen_s = time.perf_counter() - t
-        n = int(info["points"])
         io_s = None if store else _io_floor(source, work)
         for w in p["workers"]:
-            r = measure(source, os.path.join(work, f"out-{w}w"), w, model)
+            r = measure(source, os.path.join(work, f"out-{w}w"), w, model, verbose=verbose)
+            n = n or int(r["metrics"]["input"]["points"])
             runs[w] = r
             for stage, s in {**r["metrics"]["timings"], "whole run": r["seconds"]}.items():
+                mem = r["stage_memory"].get(stage) or ({"peak_total_mib": common.mib(r["peak_total"]),
+                                                        "peak_single_mib": common.mib(r["peak_single"])}
+                                                       if stage == "whole run" else {})
                 rows.append({"workers": w, "stage": stage, "seconds": round(s, 2),
-                             "points_per_s": round(n / s) if s >= 0.01 else None,
-                             **({"peak_total_mib": common.mib(r["peak_total"]),
-                                 "peak_single_mib": common.mib(r["peak_single"])} if stage == "whole run" else {})})
+                             "points_per_s": round(n / s) if s >= 0.01 else None, **mem})
             if w == max(p["workers"]):
                 tasks = r["tasks"]
         best = runs[max(p["workers"])]
@@ -154,10 +214,12 @@ def main() -> None:
     ap.add_argument("--model", help="detection model (default: the shipped one)")
     ap.add_argument("--store", action="store_true", help="generate straight into a tile store (no LAZ, no I/O floor)")
     ap.add_argument("--keep", metavar="DIR", help="work in DIR and keep the building and outputs")
+    ap.add_argument("--source", metavar="PATH", help="run on this store or point cloud instead of generating one")
+    ap.add_argument("--verbose", action="store_true", help="print the pipeline's stage lines as they come")
     ap.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
     a = ap.parse_args()
     result = run(a.quick, area=a.area, density=a.density, floors=a.floors, workers=a.workers, model=a.model,
-                 store=a.store, keep=a.keep)
+                 store=a.store, keep=a.keep, source=a.source, verbose=a.verbose)
     common.report(result)
     print(common.format_table(result["tasks"]))
     if a.json:
