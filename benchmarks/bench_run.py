@@ -156,6 +156,7 @@ def run(quick: bool = False, *, area: float | None = None, density: float | None
     rows, tasks, runs = [], [], {}
     try:
         t = time.perf_counter()
+        source_given = source is not None
         if source is None:
             source = os.path.join(work, "building.zarr" if store else "building.laz")
             info = generate(source, seed=SEED, area_m2=p["area"], floors=p["floors"], density=p["density"],
@@ -184,7 +185,9 @@ def run(quick: bool = False, *, area: float | None = None, density: float | None
         best = runs[max(p["workers"])]
         m = best["metrics"]
         det = m.get("detection") or {}
-        summary = {"points": n, "area_m2": p["area"], "floors": p["floors"], "generate_s": round(gen_s, 1),
+        generated = "generate_s" if source_given is False else "open_s"
+        summary = {"points": n, "area_m2": None if source_given else p["area"],
+                   "floors": None if source_given else p["floors"], generated: round(gen_s, 1),
                    "io_floor_s": None if io_s is None else round(io_s, 2),
                    "run_vs_io_floor": None if io_s is None else round(best["seconds"] / io_s, 2),
                    "tasks": best["task_count"], "ari": round(m["spaces"].get("ari") or 0.0, 3),
