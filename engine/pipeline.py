@@ -85,6 +85,7 @@ def run(input: str, out: str, *, client=None, options: RunOptions | None = None)
     opt = options or RunOptions()
     out = paths.normalize(out)
     _check_out(out, opt)
+    _withdraw_report(out, opt)
     timings: dict[str, float] = {}
     staging = tempfile.mkdtemp(prefix="buildingparser-run-")
     try:
@@ -464,6 +465,21 @@ def _write_small_outputs(store: TileStore, final, elements, metrics: dict[str, A
     with open(os.path.join(staging, "metrics.json"), "w") as f:
         json.dump(metrics, f, indent=1, allow_nan=False)
     write_report(staging, metrics=metrics, statistics=stats)
+
+
+def _withdraw_report(out: str, opt: RunOptions) -> None:
+    """Remove an earlier run's ``report.html``: until this run publishes its own, the folder is not complete.
+
+    (Otherwise a rerun that fails after rewriting ``points.laz`` would leave an
+    old report beside new points, looking finished.)
+    """
+    target = paths.join(out, "report.html")
+    if paths.is_local(out):
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(paths.local_path(target))
+    elif paths.exists(target, opt.storage_options):
+        fs, p = paths.filesystem(target, opt.storage_options)
+        fs.rm(p)
 
 
 def _publish(staging: str, out: str, opt: RunOptions) -> None:

@@ -142,6 +142,11 @@ def test_a_failing_space_is_reported_recorded_and_leaves_no_report(building, mon
     metrics = run(str(laz), str(out), options=RunOptions(model=model, say=lambda s: None, export_points=False))
     assert "spaces" in metrics["skipped"] and "detection" not in metrics["skipped"]
     assert (out / "report.html").is_file()
+    # a later run that fails withdraws the earlier report: the folder no longer looks complete
+    monkeypatch.setattr(det, "_detect_task", flaky)
+    with pytest.raises(TaskFailures):
+        run(str(laz), str(out), options=RunOptions(model=model, say=lambda s: None, force=True))
+    assert not (out / "report.html").exists()
 
 
 def test_cli_run_and_its_errors(building, client, tmp_path, capsys):
