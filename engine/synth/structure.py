@@ -43,6 +43,15 @@ def footprint_edges(space: Space) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(fp[i], fp[(i + 1) % len(fp)]) for i in range(len(fp))]
 
 
+def face_on_edge(space: Space, w: Wall, a: np.ndarray, e: np.ndarray) -> np.ndarray | None:
+    """Start of ``w``'s face seen from ``space`` when that face lies on the footprint edge through ``a`` along ``e``."""
+    d, n = w.direction, w.normal
+    if abs(d[0] * e[1] - d[1] * e[0]) > 1e-6:
+        return None
+    face0 = np.asarray(w.p0) + n * w.side_of(space.id) * w.thickness / 2
+    return None if abs(float(np.dot(a - face0, n))) > 1e-5 else face0
+
+
 def edge_openings(space: Space, walls: list[Wall], a: np.ndarray, b: np.ndarray) -> list[tuple[float, float, Opening]]:
     """Openings on the footprint edge ``a -> b``: ``(s0, s1, opening)`` in metres from ``a``."""
     e = b - a
@@ -53,13 +62,10 @@ def edge_openings(space: Space, walls: list[Wall], a: np.ndarray, b: np.ndarray)
         w = walls[wid]
         if w.kind == "partial" or not w.openings:
             continue
-        d, n = w.direction, w.normal
-        if abs(d[0] * e[1] - d[1] * e[0]) > 1e-6:
+        face0 = face_on_edge(space, w, a, e)
+        if face0 is None:
             continue
-        side = w.side_of(space.id)
-        face0 = np.asarray(w.p0) + n * side * w.thickness / 2
-        if abs(float(np.dot(a - face0, n))) > 1e-5:
-            continue
+        d = w.direction
         for o in w.openings:
             q0 = float(np.dot(face0 + d * o.s0 - a, e))
             q1 = float(np.dot(face0 + d * o.s1 - a, e))
@@ -172,13 +178,10 @@ def glazed_parts(space: Space, walls: list[Wall], a: np.ndarray, b: np.ndarray,
         w = walls[wid]
         if w.material != "glass" or w.kind == "partial":
             continue
-        d, n = w.direction, w.normal
-        if abs(d[0] * e[1] - d[1] * e[0]) > 1e-6:
+        face0 = face_on_edge(space, w, a, e)
+        if face0 is None:
             continue
-        side = w.side_of(space.id)
-        face0 = np.asarray(w.p0) + n * side * w.thickness / 2
-        if abs(float(np.dot(a - face0, n))) > 1e-5:
-            continue
+        d = w.direction
         q0, q1 = float(np.dot(face0 - a, e)), float(np.dot(face0 + d * w.length - a, e))
         s0, s1 = max(min(q0, q1), 0.0), min(max(q0, q1), length)
         if s1 - s0 < 0.05:
@@ -197,7 +200,7 @@ def glazed_parts(space: Space, walls: list[Wall], a: np.ndarray, b: np.ndarray,
         pitch = 1.0 + 0.5 * ((wid * 0.6180339887) % 1.0)
         along = np.arange(pitch, w.length - 0.05, pitch)
         for t in along:  # positions along the wall -> along this edge
-            s = float(np.dot(np.asarray(w.p0) + d * t + n * side * w.thickness / 2 - a, e))
+            s = float(np.dot(face0 + d * t - a, e))
             if not s0 + 0.03 < s < s1 - 0.03 or any(h0 - 0.03 < s < h1 + 0.03 for h0, h1, _, _ in holes):
                 continue
             c = a + e * s - inward * depth / 2
