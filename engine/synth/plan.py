@@ -20,8 +20,7 @@ from collections import defaultdict
 import dask
 import numpy as np
 import shapely
-from shapely.geometry import Polygon, box
-from shapely.geometry.polygon import orient
+from shapely.geometry import box
 
 from engine.synth import colours, furniture, hard_plan, shapes, structure
 from engine.synth.building import Building, Element, FloorInfo, Frame, Opening, PartSpec, Space, Wall
@@ -165,12 +164,11 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         if h.on("glass"):
             changed |= hard_plan.glass_walls(hard_rng(seed, "glass", f), floor_walls, spaces, h.level("glass"))
         if changed:
-            (shapes.joint_reach if geo is not None else _joint_reach)(floor_walls)
+            shapes.joint_reach(floor_walls)
         walls.extend(floor_walls)
-        if geo is not None:
-            shapes.clear_footprints(polys, floor_walls, spaces)
-        else:
-            _footprints(drafts, floor_walls, spaces)
+        if geo is None:  # Manhattan plan: each space's polygon is the union of its cells
+            polys = {sid: shapely.union_all([box(*c) for c in d.cells]) for sid, d in drafts.items()}
+        shapes.clear_footprints(polys, floor_walls, spaces)
         _doors(frng, floor_walls, spaces, openings, drafts, exterior_door=(f == 0), closed=closed)
         _windows(frng, floor_walls, spaces, openings, style)
         if h.on("hidden_walls"):
@@ -394,48 +392,8 @@ def _walls(drafts: dict[int, Draft], floor: int, z: float, spaces: list[Space], 
         zs = [spaces[s].z1 for s in (left, right) if s >= 0]
         walls.append(Wall(first_id + k, floor, (float(p0[0]), float(p0[1])), (float(p1[0]), float(p1[1])),
                           float(t), z, max(zs), left, right, kind))
-    _joint_reach(walls)
+    shapes.joint_reach(walls)
     return walls
-
-
-def _joint_reach(walls: list[Wall]) -> None:
-    """How far each wall body reaches past its ends: half the thickness of the walls it meets there.
-
-    Vectorised over the walls for each end (a building has thousands of walls).
-    """
-    if not walls:
-        return
-    p0 = np.array([w.p0 for w in walls], float)
-    d = np.array([w.direction for w in walls])
-    n = np.c_[-d[:, 1], d[:, 0]]
-    length = np.array([w.length for w in walls])
-    half = np.array([w.thickness for w in walls]) / 2
-    for k, w in enumerate(walls):
-        perpendicular = np.abs(d @ d[k]) <= 1e-9
-        for end in (0, 1):
-            rel = np.asarray(w.p0 if end == 0 else w.p1) - p0
-            along = np.einsum("ij,ij->i", rel, d)
-            off = np.einsum("ij,ij->i", rel, n)
-            meets = perpendicular & (np.abs(off) < 1e-6) & (along >= -1e-6) & (along <= length + 1e-6)
-            reach = float(half[meets].max()) if meets.any() else 0.0
-            if w.kind == "partial" and reach == 0.0:
-                continue
-            if end == 0:
-                w.ext0 = reach
-            else:
-                w.ext1 = reach
-
-
-def _footprints(drafts: dict[int, Draft], walls: list[Wall], spaces: list[Space]) -> None:
-    """Clear floor polygon of each space: its cells minus every wall body (partial walls stay inside)."""
-    bodies = shapely.union_all([Polygon(w.body()) for w in walls if w.kind != "partial"])
-    for sid, d in drafts.items():
-        cells = shapely.union_all([box(*c) for c in d.cells])
-        clear = shapely.set_precision(cells.difference(bodies), 1e-6)
-        if clear.geom_type != "Polygon":
-            clear = max(getattr(clear, "geoms", [clear]), key=lambda g: g.area)
-        clear = orient(clear.simplify(0), 1.0)
-        spaces[sid].footprint = np.asarray(clear.exterior.coords)[:-1]
 
 
 # -- doors ---------------------------------------------------------------------------------
