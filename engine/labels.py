@@ -29,9 +29,11 @@ def _boxes(elements: Sequence[Proposal]) -> dict[str, np.ndarray]:
     n = len(elements)
     k = max((np.asarray(e.occupancy).shape[0] for e in elements), default=1)
     out = {"center": np.zeros((n, 3)), "size": np.zeros((n, 3)), "yaw": np.zeros(n), "score": np.zeros(n),
-           "cls": np.zeros(n, np.uint8), "eid": np.zeros(n, np.int32), "occ": np.ones((n, k, k, k), bool)}
+           "cls": np.zeros(n, np.uint8), "eid": np.zeros(n, np.int32), "space": np.zeros(n, np.int64),
+           "occ": np.ones((n, k, k, k), bool)}
     for i, e in enumerate(elements):
         out["center"][i], out["size"][i], out["yaw"][i] = e.center, e.world_size, e.yaw
+        out["space"][i] = e.space_id
         out["score"][i], out["cls"][i], out["eid"][i] = e.score, e.class_code, e.element_id
         occ = np.asarray(e.occupancy, dtype=bool)
         if occ.shape == (k, k, k):
@@ -50,51 +52,154 @@ def _world_bounds(b: dict[str, np.ndarray], margin: float) -> np.ndarray:
     return np.concatenate([b["center"] - h, b["center"] + h], axis=1)
 
 
-def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Class (uint8) and element id (int32) per point of ``xyz`` (world) from detection boxes."""
+#: Candidate (point, box) pairs tested at once (bounds the memory of a batch: ~100 bytes each).
+PAIR_BATCH = 2_000_000
+#: Points whose grid cells are looked up at once.
+POINT_BATCH = 1_000_000
+#: (cell, box) entries the bucket grid may hold; its cells grow until the boxes fit.
+CELL_BUDGET = 8_000_000
+
+
+def _bucket_grid(bounds: np.ndarray, lo: np.ndarray, hi: np.ndarray, cell: float
+                 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Cell size, grid shape and the sorted ``(cell, box)`` entries of boxes over the points' extent.
+
+    Each box (row of ``bounds``, already in rank order) is entered in every cell of
+    its axis-aligned bounds clipped to ``[lo, hi]``; the cells double until the
+    entries fit :data:`CELL_BUDGET`.  Entries are sorted by cell, then by box, so a
+    cell's candidates come best first.
+    """
+    while True:
+        shape = np.maximum(np.floor((hi - lo) / cell).astype(np.int64) + 1, 1)
+        a = np.clip(np.floor((bounds[:, :3] - lo) / cell).astype(np.int64), 0, shape - 1)
+        b = np.clip(np.floor((bounds[:, 3:] - lo) / cell).astype(np.int64), 0, shape - 1)
+        ext = b - a + 1
+        per_box = ext.prod(axis=1)
+        if int(per_box.sum()) <= CELL_BUDGET or cell > 1e6:
+            break
+        cell *= 2.0
+    box = np.repeat(np.arange(len(bounds)), per_box)
+    # position of each entry inside its box's block of cells, unravelled along the box's extent
+    within = np.arange(len(box)) - np.repeat(np.cumsum(per_box) - per_box, per_box)
+    ex = ext[box]
+    cz = within % ex[:, 2]
+    rest = within // ex[:, 2]
+    cy, cx = rest % ex[:, 1], rest // ex[:, 1]
+    flat = ((a[box, 0] + cx) * shape[1] + a[box, 1] + cy) * shape[2] + a[box, 2] + cz
+    order = np.lexsort((box, flat))
+    return cell, shape, flat[order], box[order]
+
+
+def _contains(p: np.ndarray, i: np.ndarray, boxes: dict[str, np.ndarray], bounds: np.ndarray,
+              cos: np.ndarray, sin: np.ndarray, margin: float) -> np.ndarray:
+    """Whether each point ``p[j]`` lies in an occupied sub-box (grown by ``margin``) of box ``i[j]``.
+
+    The same arithmetic, operation for operation, as the box-by-box rule: the
+    world bounds first, then the box's own frame, then the occupancy of the cell
+    (a point within the margin outside the box falls in the nearest edge cell).
+    """
+    bd = bounds[i]
+    ok = ((p[:, 0] >= bd[:, 0]) & (p[:, 0] <= bd[:, 3]) & (p[:, 1] >= bd[:, 1]) & (p[:, 1] <= bd[:, 4])
+          & (p[:, 2] >= bd[:, 2]) & (p[:, 2] <= bd[:, 5]))
+    sel = np.nonzero(ok)[0]
+    p, i = p[sel], i[sel]
+    c, s = cos[i], sin[i]
+    d = p - boxes["center"][i]
+    local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+    size = np.maximum(boxes["size"][i], 1e-9)
+    rel = local + size / 2
+    inside = np.all((rel >= -margin) & (rel <= size + margin), axis=1)
+    occ = boxes["occ"]
+    k = occ.shape[1]
+    cell = np.clip(np.floor(rel / size * k).astype(np.int64), 0, k - 1)
+    ok[sel] = inside & occ.reshape(len(occ), -1)[i, (cell[:, 0] * k + cell[:, 1]) * k + cell[:, 2]]
+    return ok
+
+
+def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *,
+                 space: np.ndarray | None = None, cell: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Class (uint8) and element id (int32) per point of ``xyz`` (world) from detection boxes.
+
+    A point takes the class and element id of the highest-scoring box whose
+    occupied sub-boxes (grown by ``margin``) hold it; of boxes with equal scores,
+    the first in ``boxes`` order; boxes scored NaN or -inf label nothing.
+
+    The boxes are bucketed into a grid of ``cell`` metres (coarsened when the
+    boxes are many and large) and each point is tested only against the boxes
+    of its cell, in batches: the work is linear in points plus boxes (times the
+    boxes per cell), not their product.
+
+    Parameters
+    ----------
+    xyz
+        ``(n, 3)`` world coordinates.
+    boxes
+        The detections as :func:`_boxes` gives them.
+    margin
+        Metres by which each occupied sub-box is grown.
+    space
+        Optional ``(n,)`` space id per point: a box then labels only the points
+        of its own space (``boxes["space"]``).  None: any point (the default rule).
+    cell
+        Side in metres of the bucket grid's cells (a speed setting; the labels do not depend on it).
+    """
     n = len(xyz)
     cls = np.full(n, CLUTTER, dtype=np.uint8)
     eid = np.full(n, RESULT_NONE["element_id"], dtype=np.int32)
-    best = np.full(n, -np.inf)
-    if not len(boxes["score"]) or not n:
+    score = np.asarray(boxes["score"], dtype=np.float64)
+    if not len(score) or not n:
         return cls, eid
-    bounds = _world_bounds(boxes, margin)
-    order = np.argsort(xyz[:, 0], kind="stable")
-    xs = xyz[order, 0]
-    k = boxes["occ"].shape[1]
-    for i in np.argsort(-boxes["score"], kind="stable"):
-        a = np.searchsorted(xs, bounds[i, 0], side="left")
-        b = np.searchsorted(xs, bounds[i, 3], side="right")
-        if b <= a:
-            continue
-        idx = order[a:b]
-        p = xyz[idx]
-        sel = (p[:, 1] >= bounds[i, 1]) & (p[:, 1] <= bounds[i, 4]) & (p[:, 2] >= bounds[i, 2]) & (p[:, 2] <= bounds[i, 5])
-        idx, p = idx[sel], p[sel]
-        if not len(idx):
-            continue
-        c, s = np.cos(boxes["yaw"][i]), np.sin(boxes["yaw"][i])
-        d = p - boxes["center"][i]
-        local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
-        size = np.maximum(boxes["size"][i], 1e-9)
-        rel = local + size / 2  # [0, size] inside
-        inside = np.all((rel >= -margin) & (rel <= size + margin), axis=1)
-        cell = np.clip(np.floor(rel / size * k).astype(np.int64), 0, k - 1)
-        occ = boxes["occ"][i][cell[:, 0], cell[:, 1], cell[:, 2]]
-        # a point within the margin outside the box falls in the nearest (edge) cell
-        take = inside & occ & (boxes["score"][i] > best[idx])
-        idx = idx[take]
-        best[idx] = boxes["score"][i]
-        cls[idx] = boxes["cls"][i]
-        eid[idx] = boxes["eid"][i]
+    order = np.argsort(-score, kind="stable")
+    order = order[score[order] > -np.inf]  # NaN and -inf never beat the initial -inf
+    if not len(order):
+        return cls, eid
+    bx = {key: np.asarray(v)[order] for key, v in boxes.items()}  # rank order: lower index wins
+    bounds = _world_bounds(bx, margin)
+    cos, sin = np.cos(bx["yaw"]), np.sin(bx["yaw"])
+    if space is not None:
+        space = np.asarray(space)
+        box_space = np.asarray(bx["space"])
+    xyz = np.asarray(xyz, dtype=np.float64)
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    cell, shape, e_cell, e_box = _bucket_grid(bounds, lo, hi, cell)
+    for s in range(0, n, POINT_BATCH):
+        p_all = xyz[s:s + POINT_BATCH]
+        g = np.clip(np.floor((p_all - lo) / cell).astype(np.int64), 0, shape - 1)
+        flat = (g[:, 0] * shape[1] + g[:, 1]) * shape[2] + g[:, 2]
+        first = np.searchsorted(e_cell, flat, side="left")
+        count = np.searchsorted(e_cell, flat, side="right") - first
+        ends = np.cumsum(count)
+        # sub-batches of consecutive points holding at most PAIR_BATCH candidate pairs
+        j = 0
+        while j < len(p_all):
+            base = int(ends[j - 1]) if j else 0
+            stop = max(int(np.searchsorted(ends, base + PAIR_BATCH, side="right")), j + 1)
+            cnt = count[j:stop]
+            total = int(cnt.sum())
+            if total:
+                pt = np.repeat(np.arange(j, stop), cnt)
+                pos = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt) + np.repeat(first[j:stop], cnt)
+                bi = e_box[pos]
+                hit = _contains(p_all[pt], bi, bx, bounds, cos, sin, margin)
+                if space is not None:
+                    hit &= space[s + pt] == box_space[bi]
+                pt, bi = pt[hit], bi[hit]
+                # pairs run by point, then by rank: a point's first hit is its best box
+                lead = np.ones(len(pt), dtype=bool)
+                lead[1:] = pt[1:] != pt[:-1]
+                pt, bi = pt[lead] + s, bi[lead]
+                cls[pt] = bx["cls"][bi]
+                eid[pt] = bx["eid"][bi]
+            j = stop
     return cls, eid
 
 
-def _label_tile(job: tuple[str, dict[str, np.ndarray]], store: Any, margin: float) -> int:
+def _label_tile(job: tuple[str, dict[str, np.ndarray]], store: Any, margin: float, space_array: str | None) -> int:
     tile, boxes = job
     origin = np.asarray(store.meta.origin, dtype=np.float64)
     xyz = store.xyz(tile) + origin
-    cls, eid = label_arrays(xyz, boxes, margin)
+    space = store.read(tile, [space_array])[space_array] if space_array else None
+    cls, eid = label_arrays(xyz, boxes, margin, space=space)
     store.write_array(tile, "classification", cls)
     store.write_array(tile, "element_id", eid)
     return int((cls != CLUTTER).sum())
@@ -108,8 +213,14 @@ def result_dimensions() -> list[Dimension]:
                       {"name": "element_id", "type": "int32", "description": "detected element id"})]
 
 
-def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margin: float | None = None) -> int:
+def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margin: float | None = None,
+                 own_space: str | None = None) -> int:
     """Write per-point ``classification`` and ``element_id`` in every tile from the detections.
+
+    ``own_space`` names a per-point space array (``"space_id"``, whose ids the
+    elements' ``space_id`` follow): a detection then labels only the points of its
+    own space (the far face of a wall belongs to the room behind it).  None (the
+    default): a detection labels every point its occupied sub-boxes hold.
 
     Returns the number of points labelled with an element class.
     """
@@ -123,7 +234,7 @@ def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margi
         items.append(t.name)
         subsets.append({k: v[meet] for k, v in boxes.items()})
     counts = run_tasks(_label_tile, list(zip(items, subsets)),
-                       client=client, label="label points", keys=items, extra_args=(store, margin))
+                       client=client, label="label points", keys=items, extra_args=(store, margin, own_space))
     store.add_dimensions(result_dimensions())
     return int(sum(counts))
 
