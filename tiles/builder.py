@@ -7,11 +7,13 @@ chunk, which silently loses data.  So building is a two-step external shuffle:
 
 1. :meth:`StoreBuilder.write_part` (one task per part) sorts the part's points
    by tile, stably, and writes them to one raw file ``_staging/p<k>.bin`` in the
-   store being built, tile run after tile run, each run holding every dimension
-   in turn; it returns a :class:`PartSummary` (where each tile's run starts).
+   store being built: each dimension in turn, sorted by tile (gathered straight
+   into place, one pass per dimension); dimensions constant over the part are
+   not staged.  It returns a :class:`PartSummary` (where each tile's run starts,
+   the constants).
 2. :meth:`StoreBuilder.finalize` runs one task per tile that reads that tile's
-   run from every part (one byte range per part), in part order, and writes the
-   tile's arrays whole.
+   run from every part (one byte range per part and dimension, read straight
+   into the tile's arrays), in part order, and writes the tile's arrays whole.
    Then it writes the metadata document (``complete: true`` last), deletes the
    staging area and renames the build into place.
 
@@ -53,6 +55,8 @@ class PartSummary:
     #: (ix, iy) -> (start, count, raw_min[3], raw_max[3]) of the part's run for that tile
     tiles: dict[tuple[int, int], tuple[int, int, list[int], list[int]]] = field(default_factory=dict)
     color_max: int | None = None
+    #: dimensions whose every value in the part has the same bits (not staged): name -> the bits as an integer
+    constants: dict[str, Any] = field(default_factory=dict)
 
 
 class StoreBuilder:
@@ -115,6 +119,22 @@ class StoreBuilder:
                    storage_options=storage_options, overwrite=overwrite)
 
     # -- step 1: one task per part ------------------------------------------------------
+    def staging_layout(self, n: int, constants: dict[str, Any]) -> list[tuple[str, np.dtype, int]]:
+        """Where a part's staged arrays lie in its staging file: ``(name, dtype, byte offset)`` per array.
+
+        The file holds, one after another, every dimension of the part that is
+        not constant (``constants``), each sorted by tile, and ``point_index`` as
+        the point's position in its part (``uint32`` unless the part is larger).
+        """
+        layout, off = [], 0
+        for d in self.dimensions:
+            if d.name in constants:
+                continue
+            dt = np.dtype(("<u4" if n <= 1 << 32 else "<i8") if d.name == POINT_INDEX.name else d.dtype)
+            layout.append((d.name, dt, off))
+            off += n * dt.itemsize
+        return layout
+
     @property
     def row_bytes(self) -> int:
         """Bytes of one point over all dimensions (``point_index`` included)."""
@@ -127,12 +147,21 @@ class StoreBuilder:
 
     def tile_keys(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Tile indices of raw scaled-integer coordinates."""
-        ix = np.floor((x * self.scale[0] + self.offset[0]) / self.tile_size).astype(np.int64)
-        iy = np.floor((y * self.scale[1] + self.offset[1]) / self.tile_size).astype(np.int64)
-        return ix, iy
+        out = []
+        for v, i in ((x, 0), (y, 1)):
+            w = np.multiply(v, self.scale[i], dtype=np.float64)
+            w += self.offset[i]
+            w /= self.tile_size
+            out.append(np.floor(w, out=w).astype(np.int64))
+        return out[0], out[1]
 
     def write_part(self, part_id: int, columns: dict[str, np.ndarray]) -> PartSummary:
-        """Stage one part's points sorted by tile (stable); runs on a worker."""
+        """Stage one part's points sorted by tile (stable); runs on a worker.
+
+        Each array is gathered in tile order straight into its place in the
+        part's staging file (see :meth:`staging_layout`); an array whose every
+        value has the same bits is not staged, its value goes in the summary.
+        """
         missing = set(self.stored_names) - set(columns)
         extra = set(columns) - set(self.stored_names)
         if missing or extra:
@@ -151,28 +180,30 @@ class StoreBuilder:
         skey = key[order]
         starts = np.flatnonzero(np.r_[True, skey[1:] != skey[:-1]])
         counts = np.diff(np.r_[starts, n])
-        # One staging array per part: for each tile run (in key order) the run's values of every
-        # dimension in turn, so that a tile's task reads one contiguous byte range per part.
-        row = self.row_bytes
-        blob = np.empty(n * row, dtype=np.uint8)
-        sorted_cols: dict[str, np.ndarray] = {}
-        col_off = 0
+        values = {}
         for d in self.dimensions:
             if d.name == POINT_INDEX.name:
-                values = order.astype(np.int64)
+                continue
+            v = np.asarray(columns[d.name]).astype(d.dtype, copy=False)
+            bits = v.view(f"u{v.dtype.itemsize}")
+            if bits[0] == bits.min() == bits.max() and d.name not in ("x", "y", "z"):
+                summary.constants[d.name] = int(bits[0])
             else:
-                values = np.asarray(columns[d.name]).astype(d.dtype, copy=False)[order]
-            if d.name in ("x", "y", "z"):
-                sorted_cols[d.name] = values
-            raw = values.view(np.uint8)
-            size = values.dtype.itemsize
-            for st, ct in zip(starts.tolist(), counts.tolist()):
-                dst = st * row + ct * col_off
-                blob[dst:dst + ct * size] = raw[st * size:(st + ct) * size]
-            col_off += size
+                values[d.name] = v
+        layout = self.staging_layout(n, summary.constants)
+        blob = np.empty(layout[-1][2] + n * layout[-1][1].itemsize, dtype=np.uint8)
+        sorted_xyz = {}
+        for name, dt, off in layout:
+            dst = blob[off:off + n * dt.itemsize].view(dt)
+            if name == POINT_INDEX.name:
+                dst[:] = order
+            else:
+                np.take(values[name], order, out=dst, mode="clip")  # "clip": unbuffered, order is in range
+            if name in ("x", "y", "z"):
+                sorted_xyz[name] = dst
+        mins = {a: np.minimum.reduceat(sorted_xyz[a], starts) for a in "xyz"}
+        maxs = {a: np.maximum.reduceat(sorted_xyz[a], starts) for a in "xyz"}
         _write_staging(self, part_id, blob)
-        mins = {a: np.minimum.reduceat(sorted_cols[a], starts) for a in "xyz"}
-        maxs = {a: np.maximum.reduceat(sorted_cols[a], starts) for a in "xyz"}
         tix, tiy = ix[order[starts]], iy[order[starts]]
         for j in range(len(starts)):
             summary.tiles[(int(tix[j]), int(tiy[j]))] = (
@@ -213,7 +244,7 @@ class StoreBuilder:
         keys = sorted(runs)
         jobs = [(key, runs[key]) for key in keys]
         counts = run_tasks(_build_tile, jobs, client=client, label="writing tiles",
-                           keys=[tile_name(*k) for k in keys], extra_args=(self, firsts, len(parts)))
+                           keys=[tile_name(*k) for k in keys], extra_args=(self, firsts, [(s.count, s.constants) for s in summaries]))
         if sum(counts) != total:
             raise RuntimeError(f"tile build lost points: {sum(counts)} stored of {total}")
         scale, offset = np.asarray(self.scale), np.asarray(self.offset)
@@ -250,32 +281,41 @@ class StoreBuilder:
 
 
 def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int]]], builder: StoreBuilder,
-                firsts: list[int], n_parts: int) -> int:
-    """One tile's task: gather its run from every part, in part order, and write it whole."""
+                firsts: list[int], layouts: list[tuple[int, dict[str, Any]]]) -> int:
+    """One tile's task: gather its run from every part, in part order, and write it whole.
+
+    ``firsts`` is the first point index of every part, ``layouts`` its point
+    count and constant dimensions (see :meth:`StoreBuilder.staging_layout`).
+    """
     key, runs = job
-    offsets = np.zeros(n_parts + 1, dtype=np.int64)
+    offsets = np.zeros(len(layouts) + 1, dtype=np.int64)
     for part_id, _, count in runs:
         offsets[part_id + 1] = count
     offsets = np.cumsum(offsets)
-    dtypes = [np.dtype(d.dtype) for d in builder.dimensions]
-    row = builder.row_bytes
-    pieces: list[list[np.ndarray]] = [[] for _ in dtypes]
+    n = int(offsets[-1])
+    out = {d.name: np.empty(n, dtype=d.dtype) for d in builder.dimensions}
+    pos = 0
     for part_id, start, count in runs:
-        raw = _read_staging(builder, part_id, start * row, count * row)
-        off = 0
-        for j, (d, dt) in enumerate(zip(builder.dimensions, dtypes)):
-            a = np.frombuffer(raw, dtype=dt, count=count, offset=off)
-            if d.name == POINT_INDEX.name:
-                a = a + firsts[part_id]
-            pieces[j].append(a)
-            off += count * dt.itemsize
+        size, constants = layouts[part_id]
+        layout = builder.staging_layout(size, constants)
+        ranges = [(off + start * dt.itemsize, count * dt.itemsize) for _, dt, off in layout]
+        targets = []
+        for name, dt, _ in layout:
+            dst = out[name][pos:pos + count]
+            targets.append(dst if dst.dtype == dt else np.empty(count, dtype=dt))
+        _read_staging(builder, part_id, ranges, targets)
+        for (name, dt, _), got in zip(layout, targets):
+            if got.base is not out[name]:
+                out[name][pos:pos + count] = got
+        for name, bits in constants.items():
+            dst = out[name][pos:pos + count]
+            dst.view(f"u{dst.dtype.itemsize}")[:] = bits
+        out[POINT_INDEX.name][pos:pos + count] += firsts[part_id]
+        pos += count
     tile_url = paths.join(builder.build_url, "tiles", tile_name(*key))
     _open_group(tile_url, builder.storage_options, mode="w")
-    n = 0
-    for d, p in zip(builder.dimensions, pieces):
-        values = np.concatenate(p)
-        n = len(values)
-        zarrio.write_array(tile_url, d.name, values, builder.storage_options)
+    for d in builder.dimensions:
+        zarrio.write_array(tile_url, d.name, out.pop(d.name), builder.storage_options)
     zarrio.write_array(tile_url, "part_offsets", offsets, builder.storage_options)
     return n
 
@@ -301,19 +341,24 @@ def _write_staging(builder: StoreBuilder, part_id: int, blob: np.ndarray) -> Non
         fs.pipe_file(p, memoryview(blob).tobytes())
 
 
-def _read_staging(builder: StoreBuilder, part_id: int, offset: int, size: int) -> bytes:
-    """``size`` bytes of a part's staging file from ``offset``."""
+def _read_staging(builder: StoreBuilder, part_id: int, ranges: list[tuple[int, int]],
+                  targets: list[np.ndarray]) -> None:
+    """Read the byte ranges ``(offset, size)`` of a part's staging file into the arrays ``targets``."""
     url = _staging_url(builder, part_id)
     if paths.is_local(url):
-        with open(url, "rb") as f:
-            f.seek(offset)
-            data = f.read(size)
-    else:
-        fs, p = paths.filesystem(url, builder.storage_options)
-        data = fs.cat_file(p, start=offset, end=offset + size)
-    if len(data) != size:
-        raise RuntimeError(f"staging file of part {part_id} is short: {len(data)} of {size} bytes at {offset}")
-    return data
+        with open(url, "rb", buffering=0) as f:
+            for (offset, size), dst in zip(ranges, targets):
+                f.seek(offset)
+                got = f.readinto(memoryview(dst).cast("B")) if size else 0
+                if got != size:
+                    raise RuntimeError(f"staging file of part {part_id} is short: {got} of {size} bytes at {offset}")
+        return
+    fs, p = paths.filesystem(url, builder.storage_options)
+    blobs = fs.cat_ranges([p] * len(ranges), [o for o, _ in ranges], [o + s for o, s in ranges])
+    for (offset, size), dst, data in zip(ranges, targets, blobs):
+        if isinstance(data, Exception) or len(data) != size:
+            raise RuntimeError(f"staging file of part {part_id} is short at {offset}: {data!r:.80}")
+        memoryview(dst).cast("B")[:] = data
 
 
 def _looks_like_store(url: str) -> bool:

@@ -95,3 +95,31 @@ def test_unfinished_store_is_refused(tmp_path):
     b = StoreBuilder.create(str(tmp_path / "t.zarr"), dimensions=DIMS, scale=[0.001] * 3, offset=[0, 0, 0])
     with pytest.raises(UserError, match="incomplete"):
         open_store(b.build_url)
+
+
+def test_constant_arrays_are_not_staged_and_keep_every_bit(tmp_path):
+    """A dimension constant in a part is kept in the part's summary, not staged; its bits come back exactly
+    (-0.0 and a NaN payload included), next to parts where the same dimension varies."""
+    n = 6000
+    cols = _cloud(n, seed=5)
+    odd_nan = np.array([0x7FF8DEADBEEF0001], dtype=np.uint64).view(np.float64)[0]
+    gps = np.concatenate([np.full(2000, -0.0), np.full(2000, odd_nan), np.linspace(-1, 1, 2000)])
+    flag = np.concatenate([np.full(4000, 7, np.uint8), np.arange(2000) % 3]).astype(np.uint8)
+    cols = {**cols, "gps_time": gps, "flag": flag}
+    dims = DIMS + [Dimension("gps_time", "float64", "las", las={"name": "gps_time"}),
+                   Dimension("flag", "uint8", "las", las={"name": "user_data"})]
+    b = StoreBuilder.create(str(tmp_path / "c.zarr"), dimensions=dims, scale=[0.001] * 3, offset=[0.0] * 3)
+    summaries = [b.write_part(k, {c: v[2000 * k:2000 * (k + 1)] for c, v in cols.items()}) for k in range(3)]
+    assert set(summaries[0].constants) == {"gps_time", "flag"} and set(summaries[1].constants) == {"gps_time", "flag"}
+    assert summaries[2].constants == {}
+    store = b.finalize(summaries, parts=[Part(0, 2000 * k, 2000) for k in range(3)],
+                       sources=[Source("mem", "test", n)])
+    pieces = {c: [] for c in ("gps_time", "flag", "x", "point_index")}
+    for t in store.tiles:
+        for c, v in store.read(t, list(pieces)).items():
+            pieces[c].append(v)
+    back = {c: np.concatenate(v) for c, v in pieces.items()}
+    order = np.argsort(back["point_index"])
+    np.testing.assert_array_equal(back["gps_time"][order].view(np.uint64), gps.view(np.uint64))
+    np.testing.assert_array_equal(back["flag"][order], flag)
+    np.testing.assert_array_equal(back["x"][order], cols["x"])
