@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine import moments as mom
-from engine.features import FeatureLayout, SpaceVolume, global_features, local_features, sub_bounds
+from engine.features import LOCAL_SIZE, FeatureLayout, SpaceVolume, global_features, local_features, sub_bounds
 
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000
@@ -69,6 +69,36 @@ def _intervals(pos: np.ndarray, w: int, k: int) -> tuple[np.ndarray, np.ndarray]
     return uniq, inv.reshape(len(pos), k)
 
 
+def _slot_sums(feats: np.ndarray, index: tuple[np.ndarray, np.ndarray, np.ndarray], w2: np.ndarray,
+               k: int) -> np.ndarray:
+    """``sum over slots (a, b, c) of feats[index_x[:, a], index_y[:, b], index_z[:, c]] @ w2[a, b, c]``.
+
+    ``feats`` is ``(ux, uy, uz, F)`` over distinct sub-box intervals, ``index[d]``
+    ``(n_d, k)`` the interval of each position and slot along axis ``d``, ``w2``
+    ``(k, k, k, F, m)``; the result is ``(n_x, n_y, n_z, m)``.  The axis whose
+    positions share the fewest intervals is gathered last, as scalars: per pair of
+    slots along the two other axes one gather of feature vectors and one product
+    with the ``k`` slots' weights along it.
+    """
+    nu = np.array(feats.shape[:3])
+    npos = np.array([len(i) for i in index])
+    d = int(np.argmin(nu / npos))  # gathered last
+    g0, g1 = (a for a in range(3) if a != d)
+    f = np.ascontiguousarray(np.moveaxis(feats, (g0, g1, d), (0, 1, 2)))
+    wt = np.moveaxis(w2, (g0, g1, d), (0, 1, 2))  # (k, k, k, F, m) in (g0, g1, d) slot order
+    m = w2.shape[-1]
+    acc = np.zeros((npos[g0], npos[g1], npos[d], m))
+    for a in range(k):
+        for b in range(k):
+            fab = f[np.ix_(index[g0][:, a], index[g1][:, b])]  # (n_g0, n_g1, u_d, F)
+            # (k * m, n_g0, n_g1, u_d): per slot along d and output, a contiguous field
+            g = np.moveaxis(fab @ wt[a, b].transpose(1, 0, 2).reshape(f.shape[-1], k * m), -1, 0).copy()
+            for c in range(k):
+                for j in range(m):
+                    acc[..., j] += np.take(g[c * m + j], index[d][:, c], axis=2)
+    return np.moveaxis(acc, (0, 1, 2), (g0, g1, d))
+
+
 @dataclass
 class WindowScores:
     """Scores of one window shape at all its positions (``scores[i, j, k]`` at ``(px[i], py[j], pz[k])``)."""
@@ -96,44 +126,56 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
     (tested); ``weights`` are the full layout's (masked groups are ignored).
     """
     k = layout.k
+    k3 = k ** 3
     grid = vol.grid
     n = np.asarray(grid.shape)
     shape = np.minimum(np.asarray(shape, dtype=np.int64), n)
     w = np.where(layout.mask, np.asarray(weights, dtype=np.float64), 0.0)
     wg = w[:layout.n_global]
-    wl = w[layout.n_global:].reshape(k, k, k, -1)
+    wl = w[layout.n_global:].reshape(k3, -1)  # (K^3, 9) per slot, x-major
+    w_lin = wl.copy()
+    w_lin[:, 1] = 0.0  # the ratio is added per window at the end
     px, py, pz = window_positions(grid, shape, stride, max_stride)
     ux, ix = _intervals(px, int(shape[0]), k)
     uy, iy = _intervals(py, int(shape[1]), k)
     uz, iz = _intervals(pz, int(shape[2]), k)
-    # window counts and global part
+    # window counts, and the global part where a window holds enough points (elsewhere -inf)
     win = lambda p, s: np.stack([p, p + s], axis=1)  # noqa: E731
     counts = mom.box_sums_grid(vol.iv[..., :1], win(px, shape[0]), win(py, shape[1]), win(pz, shape[2]))[..., 0]
-    gx, gy, gz = np.meshgrid(px, py, pz, indexing="ij")
-    lo = np.stack([gx, gy, gz], axis=-1)
-    size = np.broadcast_to(shape, lo.shape)
-    scores = global_features(lo / n, size / n, size * grid.voxel) @ wg + float(bias)
-    ratio_acc = np.zeros_like(scores)
-    # local part, in batches of x positions so that the sub-box table stays bounded; each of the
-    # K^3 slots gathers the features of its sub-box for all windows at once
+    valid = counts >= min_points
+    lin = np.zeros(counts.shape + (2,))  # the linear part, the ratio's weighted raw counts
+    if valid.any():
+        vi = np.nonzero(valid)
+        lo = np.stack([px[vi[0]], py[vi[1]], pz[vi[2]]], axis=-1)
+        size = np.broadcast_to(shape, lo.shape)
+        lin[..., 0][valid] = global_features(lo / n, size / n, size * grid.voxel) @ wg + float(bias)
+    # local part, in batches of x positions so that the sub-box table stays bounded.  Only the
+    # occupied sub-boxes get local features (they are all zero elsewhere; in a room most sub-boxes
+    # are air).  A slot's term is linear in its sub-box's features: for each pair of slots along
+    # two axes the features are gathered for all windows but kept whole along the third axis
+    # (the one with the fewest distinct intervals per position), dotted at once with the K slots'
+    # weights along that axis, and the K scalars are then gathered along it.
     per_x = max(1, SUBBOX_BATCH // max(len(uy) * len(uz), 1))
-    w_lin = wl.copy()
-    w_lin[..., 1] = 0.0
+    occupied = max(int(layout.min_points), 1)
+    # weights (K, K, K, 9, 2): the linear part and the ratio's raw-count column
+    w2 = np.zeros((k, k, k, LOCAL_SIZE, 2))
+    w2[..., 0] = w_lin.reshape(k, k, k, -1)
+    w2[..., 1, 1] = wl[:, 1].reshape(k, k, k)
     for s in range(0, len(px), per_x):
         sl = slice(s, s + per_x)
         need, sub_ix = np.unique(ix[sl], return_inverse=True)
         sub_ix = sub_ix.reshape(ix[sl].shape)
         sums = mom.box_sums_grid(vol.iv, ux[need], uy, uz)
-        feats = local_features(sums, np.ones(sums.shape[:-1]), k, layout.min_points)
-        feats[..., 1] = np.where(feats[..., 0] > 0, sums[..., 0], 0.0)  # raw count: ratio = count / window count
-        for a in range(k):
-            for b in range(k):
-                for c in range(k):
-                    f = feats[np.ix_(sub_ix[:, a], iy[:, b], iz[:, c])]
-                    scores[sl] += f @ w_lin[a, b, c]
-                    ratio_acc[sl] += f[..., 1] * wl[a, b, c, 1]
-    scores += ratio_acc / np.maximum(counts, 1.0) * k ** 3
-    scores = np.where(counts >= min_points, scores, -np.inf)
+        occ = sums[..., 0] >= occupied
+        feats = np.zeros(sums.shape[:-1] + (LOCAL_SIZE,))
+        part = local_features(sums[occ], np.ones(int(occ.sum())), k, layout.min_points)
+        part[:, 1] = sums[occ][:, 0]  # raw count: ratio = count / window count
+        feats[occ] = part
+        lin[sl] += _slot_sums(feats, (sub_ix, iy, iz), w2, k)
+    ratio = lin[..., 1]
+    lin = lin[..., 0]
+    scores = lin + ratio / np.maximum(counts, 1.0) * k3
+    scores = np.where(valid, scores, -np.inf)
     return WindowScores(shape, px, py, pz, scores, counts)
 
 
