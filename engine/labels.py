@@ -58,6 +58,8 @@ PAIR_BATCH = 2_000_000
 POINT_BATCH = 1_000_000
 #: (cell, box) entries the bucket grid may hold; its cells grow until the boxes fit.
 CELL_BUDGET = 8_000_000
+#: Grids of at most this many cells get a dense table of each cell's first entry (else a binary search).
+DENSE_CELLS = 4_000_000
 
 
 def _bucket_grid(bounds: np.ndarray, lo: np.ndarray, hi: np.ndarray, cell: float
@@ -117,7 +119,7 @@ def _contains(p: np.ndarray, i: np.ndarray, boxes: dict[str, np.ndarray], bounds
 
 
 def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *,
-                 space: np.ndarray | None = None, cell: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+                 space: np.ndarray | None = None, cell: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
     """Class (uint8) and element id (int32) per point of ``xyz`` (world) from detection boxes.
 
     A point takes the class and element id of the highest-scoring box whose
@@ -162,12 +164,20 @@ def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *
     xyz = np.asarray(xyz, dtype=np.float64)
     lo, hi = xyz.min(axis=0), xyz.max(axis=0)
     cell, shape, e_cell, e_box = _bucket_grid(bounds, lo, hi, cell)
+    n_cells = int(np.prod(shape))
+    if n_cells <= DENSE_CELLS:
+        start = np.zeros(n_cells + 1, dtype=np.int64)
+        np.cumsum(np.bincount(e_cell, minlength=n_cells), out=start[1:])
     for s in range(0, n, POINT_BATCH):
         p_all = xyz[s:s + POINT_BATCH]
         g = np.clip(np.floor((p_all - lo) / cell).astype(np.int64), 0, shape - 1)
         flat = (g[:, 0] * shape[1] + g[:, 1]) * shape[2] + g[:, 2]
-        first = np.searchsorted(e_cell, flat, side="left")
-        count = np.searchsorted(e_cell, flat, side="right") - first
+        if n_cells <= DENSE_CELLS:
+            first = start[flat]
+            count = start[flat + 1] - first
+        else:
+            first = np.searchsorted(e_cell, flat, side="left")
+            count = np.searchsorted(e_cell, flat, side="right") - first
         ends = np.cumsum(count)
         # sub-batches of consecutive points holding at most PAIR_BATCH candidate pairs
         j = 0

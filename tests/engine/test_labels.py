@@ -127,6 +127,9 @@ def test_labels_do_not_depend_on_cell_size_or_batching(monkeypatch):
         assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), cell
         got = label_arrays(pts, boxes, 0.02, cell=cell, space=space)
         assert np.array_equal(got[0], want_own[0]) and np.array_equal(got[1], want_own[1]), cell
+    monkeypatch.setattr(labels, "DENSE_CELLS", 10)  # a binary search for the cells
+    got = label_arrays(pts, boxes, 0.02, cell=0.05)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
     monkeypatch.setattr(labels, "CELL_BUDGET", 50)  # the grid must coarsen to hold the boxes
     got = label_arrays(pts, boxes, 0.02, cell=0.05)
     assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
