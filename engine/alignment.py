@@ -171,9 +171,26 @@ def image_orientation_histogram(img: np.ndarray, params: AlignmentParams) -> np.
     """
     p = params
     nbins = int(round(90.0 / p.angle_bin))
+    if not (img > 0).any():
+        return np.zeros(nbins)
+    ang, weight = orientation_field(img, p)
+    border = int(math.ceil(3 * p.sigma))
+    inner = np.zeros(img.shape, dtype=bool)
+    if img.shape[0] > 2 * border and img.shape[1] > 2 * border:
+        inner[border:-border, border:-border] = True
+    idx = np.minimum((ang[inner] / p.angle_bin).astype(np.int64), nbins - 1)
+    return np.bincount(idx, weights=weight[inner], minlength=nbins)
+
+
+def orientation_field(img: np.ndarray, params: AlignmentParams) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel of a density image: the dominant orientation modulo 90 degrees and its coherent strength.
+
+    See :func:`image_orientation_histogram` (which bins these); both arrays have the image's shape.
+    """
+    p = params
     occ = img > 0
     if not occ.any():
-        return np.zeros(nbins)
+        return np.zeros(img.shape), np.zeros(img.shape)
     floor_level = p.wall_factor * float(np.median(img[occ]))
     f = np.log1p(np.maximum(img - floor_level, 0.0))
     gy = ndimage.gaussian_filter(f, p.sigma, order=(1, 0), mode="nearest")
@@ -182,15 +199,9 @@ def image_orientation_histogram(img: np.ndarray, params: AlignmentParams) -> np.
     jxx = ndimage.gaussian_filter(gx * gx, rho, mode="constant")
     jyy = ndimage.gaussian_filter(gy * gy, rho, mode="constant")
     jxy = ndimage.gaussian_filter(gx * gy, rho, mode="constant")
-    border = int(math.ceil(3 * p.sigma))
-    inner = np.zeros(f.shape, dtype=bool)
-    if f.shape[0] > 2 * border and f.shape[1] > 2 * border:
-        inner[border:-border, border:-border] = True
-    jxx, jyy, jxy = jxx[inner], jyy[inner], jxy[inner]
     weight = np.hypot(jxx - jyy, 2 * jxy)
     ang = np.mod(np.degrees(0.5 * np.arctan2(2 * jxy, jxx - jyy)), 90.0)
-    idx = np.minimum((ang / p.angle_bin).astype(np.int64), nbins - 1)
-    return np.bincount(idx, weights=weight, minlength=nbins)
+    return ang, weight
 
 
 def coarse_yaw(hist: np.ndarray, angle_bin: float) -> float:

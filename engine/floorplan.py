@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import dask.config
 import numpy as np
 
+from engine.alignment import Frame
 from engine.spaces import SpaceParse
 from tiles.store import TileStore
 from tiles.tasks import run_tasks
@@ -116,7 +117,7 @@ def draw_floorplan(store: TileStore, parse: SpaceParse, path: str | os.PathLike,
                     continue
                 a = d.position
                 ends = [[a, d.extent[0]], [a, d.extent[1]]] if d.axis == "u" else [[d.extent[0], a], [d.extent[1], a]]
-                seg = frame.to_world(np.array(ends))
+                seg = (frame if d.yaw is None else Frame(d.yaw, frame.origin)).to_world(np.array(ends))
                 ax.plot(seg[:, 0], seg[:, 1], color="black" if d.kind != "empty" else "0.5",
                         lw=0.6, ls="-" if d.kind != "empty" else ":")
         for s in parse.spaces:

@@ -84,12 +84,16 @@ class FoundDivider:
     level: int = 0
     contrast: float = 1.0
     void_ratio: float = 0.0
+    yaw: float | None = None  # the frame of position/extent when not the building's (a refined space; same origin)
 
     def to_json(self) -> dict[str, Any]:
-        return {"axis": self.axis, "floor": self.floor, "position": round(self.position, 4),
-                "width": round(self.width, 4), "score": round(float(self.score), 4),
-                "extent": [round(v, 4) for v in self.extent], "kind": self.kind, "level": self.level,
-                "contrast": round(float(self.contrast), 4), "void_ratio": round(float(self.void_ratio), 4)}
+        out = {"axis": self.axis, "floor": self.floor, "position": round(self.position, 4),
+               "width": round(self.width, 4), "score": round(float(self.score), 4),
+               "extent": [round(v, 4) for v in self.extent], "kind": self.kind, "level": self.level,
+               "contrast": round(float(self.contrast), 4), "void_ratio": round(float(self.void_ratio), 4)}
+        if self.yaw is not None:
+            out["yaw"] = float(self.yaw)
+        return out
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> "FoundDivider":

@@ -153,7 +153,8 @@ def separated_pairs(parse: SpaceParse, walls: Sequence[Any],
             if nb.space <= s.id:
                 continue
             length = float(sum(f.extent[1] - f.extent[0] for f in nb.faces))
-            covered = float(sum(face_coverage(f, boxes, parse.frame, params) for f in nb.faces))
+            covered = float(sum(face_coverage(f, boxes, parse.frame if getattr(f, "yaw", None) is None
+                                              else Frame(f.yaw, parse.frame.origin), params) for f in nb.faces))
             out[(s.id, nb.space)] = {"length": length, "covered": covered,
                                      "wall": length > 0 and covered >= params.coverage * length - 1e-9}
     return out

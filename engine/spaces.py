@@ -13,8 +13,13 @@ into one process; the driver only sums small per-tile results):
    face, then agglomeration of the cells through the faces without a divider
    (most open pair of groups first; a leaky face does not chain two rooms) and
    absorption of weak groups;
-5. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile
-   and collecting per-space counts, z ranges and tiles.
+5. refinement (:mod:`engine.refine`): every space of at least ``refine_min_area``
+   m² is parsed again on its own points, in its own frame(s), one task per
+   space; when that splits it, its pieces replace it (a wing at an angle, a
+   large cell never cut);
+6. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile
+   (a refined space's points located in its new cells) and collecting
+   per-space counts, z ranges and tiles.
 
 The document ``meta/spaces`` (:meth:`SpaceParse.to_doc`), which later stages
 rely on::
@@ -25,18 +30,23 @@ rely on::
          # world:   x = origin_x + c*u - s*v, y = origin_y + s*u + c*v  (c, s = cos, sin of yaw)
      "grid": {"bin_width", "z_bin"},          # bins of the aligned frame (metres)
      "floors": [{"id", "z_range": [z0, z1] (world), "point_count"}],
-     "cells": [{"id", "floor", "box": [u0, v0, u1, v1] (aligned metres), "point_count", "space"}],
+     "cells": [{"id", "floor", "box": [u0, v0, u1, v1] (aligned metres), "point_count", "space",
+                "yaw"}],  # yaw: null, or the frame (radians, same origin) of a refined space's cell;
+                          # a refined space's former cells stay with "space": -1 and no points
      "dividers": [{"axis": "u"|"v"|"z", "floor" (-1 for slabs), "position" (aligned metres along axis;
                    for "z" world z), "width", "extent": [a, b] (along the other horizontal axis),
-                   "score", "kind": "peak-gap-peak"|"empty", "level", "contrast", "void_ratio"}],
+                   "score", "kind": "peak-gap-peak"|"empty", "level", "contrast", "void_ratio",
+                   "yaw" (only in a refined space's own frame)}],
      "spaces": [{"id", "floor", "cells": [ids], "footprint": GeoJSON Polygon/MultiPolygon (world x, y),
                  "area_m2", "z_range": [z0, z1] (world), "point_count", "tiles": [names],
                  "neighbours": [{"space", "faces": [{"axis", "position", "extent": [a, b], "z_range",
                                  "segment": [[x0, y0], [x1, y1]] (world), "divider": bool,
-                                 "divider_kind", "score"}]}]}],
+                                 "divider_kind", "score", "yaw"}]}]}],  # yaw: as the cells'
+                 # a refined space's footprint is its new cells' union clipped to the space it came from
      "unassigned_points", "point_count",
      "stats": {"passes": [{"pass", "searched", "dividers", "boxes", "tiles"}], "cells", "edges",
-               "edges_divided", "absorbed", "dropped", "merges_refused", "seconds": {step: seconds}},
+               "edges_divided", "absorbed", "dropped", "merges_refused", "refine_searched",
+               "refined": [{"space", "spaces", "yaw_deg": [per part]}], "seconds": {step: seconds}},
      "params": {...}}
 
 A face is a piece of a shared face between two cells of the two spaces, along
@@ -62,8 +72,9 @@ import numpy as np
 from engine import config  # noqa: F401  (registers the defaults)
 from engine.alignment import AlignmentParams, Frame, estimate_alignment, tile_evidence
 from engine.dividers import DividerParams, vertical_params
-from engine.histograms import BoxIndex, Grid, share, tiles_by_size, z_histogram
+from engine.histograms import BoxIndex, Grid, share, tile_extents, tiles_by_size, tiles_touching, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
+from engine.refine import Refinement, clipped_footprint, face_side_space, refine_space, relabel
 from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
 from tiles.schema import Dimension
 from tiles.store import TileStore
@@ -106,6 +117,19 @@ class SpaceParams:
     min_open_ratio: float = 0.05
     #: ... and a face to a cell with fewer points per m² than this fraction of the median cell's does not count.
     min_scanned_density: float = 0.2
+    #: Spaces of at least this many m² are parsed again on their own points in their own frame
+    #: (:mod:`engine.refine`; 0: never) ...
+    refine_min_area: float = 40.0
+    #: ... whose yaw, when within this many degrees of the building's, is the building's.
+    refine_snap_deg: float = 2.0
+    #: A refined space whose walls follow a second orientation at least ``refine_separation_deg`` from the
+    #: first, with at least ``refine_min_second`` of its weight, is split into the regions of the two
+    #: (votes summed over ``refine_block`` m squares, smoothed over ``refine_smooth`` m), each parsed in
+    #: its own frame.
+    refine_separation_deg: float = 5.0
+    refine_min_second: float = 0.5
+    refine_block: float = 0.5
+    refine_smooth: float = 1.5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "walls", dataclasses.replace(self.walls, bin_width=self.bin_width))
@@ -131,7 +155,8 @@ class SpaceParams:
         for name in ("bin_width", "z_bin", "yaw", "max_levels", "slicing_void_ratio", "slicing_void_ratio_full",
                      "min_storey_height", "upper_band", "merge_window",
                      "min_face", "min_space_area", "min_space_width", "min_relative_density", "min_open_ratio",
-                     "min_scanned_density"):
+                     "min_scanned_density", "refine_min_area", "refine_snap_deg",
+                     "refine_separation_deg", "refine_min_second", "refine_block", "refine_smooth"):
             if c.get(name) is not None:
                 kw[name] = c[name]
         if c.get("walls"):
@@ -166,6 +191,7 @@ class Cell:
     box: list[float]  # [u0, v0, u1, v1] aligned metres
     point_count: int
     space: int
+    yaw: float | None = None  # the box's frame when not the building's (a refined space's cell; same origin)
 
 
 @dataclass
@@ -178,6 +204,7 @@ class Face:
     divider: bool
     divider_kind: str | None = None
     score: float | None = None
+    yaw: float | None = None  # the frame of axis/position/extent when not the building's (same origin)
 
 
 @dataclass
@@ -285,12 +312,19 @@ def _first_pass(tile: str, store, params: AlignmentParams, grid: Grid, z_lo: int
     return {"evidence": tile_evidence(xy, params), "z": z_histogram(bz, z_lo, z_n)}
 
 
-def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.ndarray) -> dict[str, Any]:
-    """Write ``cell_id`` and ``space_id`` of one tile; its cells' and spaces' point counts and z ranges (sparse)."""
+def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.ndarray,
+                refined: list[tuple[Refinement, list[tuple[Grid, BoxIndex, int]]]], owner: np.ndarray
+                ) -> dict[str, Any]:
+    """Write ``cell_id`` and ``space_id`` of one tile; its cells' and spaces' point counts and z ranges (sparse).
+
+    Points of a refined space are located in its refinement's cells (:func:`engine.refine.relabel`).
+    """
     m = store.meta
     raw = store.read(tile, ("x", "y", "z"))
     bu, bv, bz = grid.raw_bins(raw, grid.raw_affine(m))
     cell = index.locate(bu, bv, bz)
+    if refined:
+        cell = relabel(cell, raw, m, refined, owner)
     space = np.append(cell_space, -1)[cell]  # cell -1 -> space -1
     store.write_array(tile, "cell_id", cell.astype(np.int32))
     store.write_array(tile, "space_id", space.astype(np.int32))
@@ -310,6 +344,127 @@ def _label_tile(tile: str, store, grid: Grid, index: BoxIndex, cell_space: np.nd
 
 
 # -- the stage ---------------------------------------------------------------------------------------------
+
+def _refine(store, grid: Grid, p: SpaceParams, floors: np.ndarray, band_z: np.ndarray, cells: list[Box],
+            labels: np.ndarray, index: BoxIndex, client) -> list[Refinement]:
+    """Every space of at least ``refine_min_area`` m² parsed again in its own frame (one task each)."""
+    if p.refine_min_area <= 0 or not len(cells) or labels.max() < 0:
+        return []
+    bw = p.bin_width
+    area = np.array([(c.u1 - c.u0) * (c.v1 - c.v0) for c in cells], dtype=np.float64) * bw * bw
+    ok = labels >= 0
+    space_area = np.bincount(labels[ok], weights=area[ok], minlength=int(labels.max()) + 1)
+    extents = tile_extents(store, grid)
+    names = [t.name for t in store.tiles]
+    items = []
+    for sp in np.flatnonzero(space_area >= p.refine_min_area).tolist():
+        members = np.flatnonzero(labels == sp)
+        touch = tiles_touching(extents, floors, np.array([cells[i].row() for i in members]))
+        items.append({"space": int(sp), "floor": int(cells[members[0]].floor), "cells": members,
+                      "tiles": [names[i] for i in np.flatnonzero(touch)]})
+    if not items:
+        return []
+    return run_tasks(refine_space, items, client=client, label="spaces: refining large spaces",
+                     keys=[it["space"] for it in items],
+                     extra_args=(store, share(client, index), grid, p, floors, band_z))
+
+
+@dataclass
+class _RefinedPlan:
+    """The building's cells and edges with the refinements' appended, and the spaces renumbered.
+
+    A refined space's own cells keep their ids but get no space (-1); its new
+    cells follow the building's (``firsts[k]``: the first of refinement ``k``)
+    and their spaces replace it, numbered in its place.  ``sides[e]`` is the
+    space on each side of edge ``e``: a building edge next to a refined space
+    gets the new space found on its side of the face; ``edge_yaw[e]`` the frame
+    of a refinement's edge (None: the building's).
+    """
+
+    cells: list[Box]
+    edges: list[Edge]
+    labels: np.ndarray
+    owner: np.ndarray
+    refinements: list[Refinement]
+    firsts: list[list[int]]
+    cell_yaw: list[float | None]
+    edge_yaw: list[float | None]
+    sides: np.ndarray
+    sub_of: dict[int, tuple[int, float]]
+    clip: dict[int, list[int]]
+    dividers: list[FoundDivider]
+    n_spaces: int
+
+    @classmethod
+    def build(cls, cells: list[Box], edges: list[Edge], labels: np.ndarray, refs: list[Refinement],
+              frame: Frame | None = None, bin_width: float = 0.01) -> "_RefinedPlan":
+        kept = [r for r in refs if r.n_spaces >= 2]
+        ref_of = {r.space: k for k, r in enumerate(kept)}
+        n_old = int(labels.max()) + 1 if len(labels) and labels.max() >= 0 else 0
+        new_id = np.full(n_old + 1, -1, dtype=np.int64)  # old space -> new (-1: refined or none)
+        base: dict[int, int] = {}
+        nxt = 0
+        for sp in range(n_old):
+            if sp in ref_of:
+                base[sp] = nxt
+                nxt += kept[ref_of[sp]].n_spaces
+            else:
+                new_id[sp] = nxt
+                nxt += 1
+        old = np.asarray(labels, dtype=np.int64)
+        lab = [new_id[old]]  # old -1 -> new_id[-1] = -1
+        owner = np.full(len(cells) + 1, -1, dtype=np.int64)
+        for k, r in enumerate(kept):
+            owner[1:][old == r.space] = k
+        all_cells, all_edges = list(cells), list(edges)
+        cell_yaw: list[float | None] = [None] * len(cells)
+        edge_yaw: list[float | None] = [None] * len(edges)
+        firsts, sub_of, clip, dividers = [], {}, {}, []
+        origin = frame.origin if frame is not None else (0.0, 0.0, 0.0)
+        # building edges: the space on each side (a refined side: the new space at the face)
+        sides = np.full((len(edges), 2), -1, dtype=np.int64)
+        for i, e in enumerate(edges):
+            la, lb = int(old[e.a]), int(old[e.b])
+            if la == lb and la in ref_of:
+                continue  # inside a refined space: its refinement has its own faces
+            for j, (cell, lo) in enumerate(((e.a, la), (e.b, lb))):
+                if lo < 0:
+                    continue
+                if lo not in ref_of:
+                    sides[i, j] = new_id[lo]
+                    continue
+                step = -2 if j == 0 else 2  # a lies below the face, b above
+                mid = 0.5 * (e.overlap[0] + e.overlap[1])
+                pt = [e.position + step, mid] if e.axis == 0 else [mid, e.position + step]
+                world = frame.to_world(np.asarray(pt, dtype=np.float64) * bin_width)
+                r = kept[ref_of[lo]]
+                got = face_side_space(r, world, origin, bin_width)
+                sides[i, j] = base[lo] + got if got >= 0 else -1
+        for k, r in enumerate(kept):
+            firsts.append([])
+            at = base[r.space]
+            for pt in r.parts:
+                first = len(all_cells)
+                firsts[-1].append(first)
+                all_cells += pt.cells
+                cell_yaw += [None if frame is not None and pt.yaw == frame.yaw else pt.yaw] * len(pt.cells)
+                sl = np.asarray(pt.labels, dtype=np.int64)
+                sub_sides = np.where(sl >= 0, sl + at, -1)
+                lab.append(sub_sides)
+                rows = []
+                for e in pt.edges:
+                    all_edges.append(dataclasses.replace(e, a=e.a + first, b=e.b + first))
+                    rows.append([sub_sides[e.a], sub_sides[e.b]])
+                edge_yaw += [None if frame is not None and pt.yaw == frame.yaw else pt.yaw] * len(pt.edges)
+                sides = np.vstack([sides, np.array(rows, dtype=np.int64).reshape(-1, 2)])
+                for j in range(pt.n_spaces):
+                    sub_of[at + j] = (k, pt.yaw)
+                at += pt.n_spaces
+                dividers += pt.dividers
+            clip[k] = np.flatnonzero(old == r.space).tolist()
+        return cls(all_cells, all_edges, np.concatenate(lab) if lab else np.zeros(0, np.int64), owner, kept,
+                   firsts, cell_yaw, edge_yaw, sides, sub_of, clip, dividers, nxt)
+
 
 def _initial_boxes(store, grid: Grid, floors: list[tuple[int, int]]) -> list[Box]:
     """One box per storey covering every tile's bounds (rotated corners), in bins."""
@@ -387,22 +542,35 @@ def parse_spaces(store: TileStore, *, client: Client | None = None, params: Spac
     seconds["merging"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    n_spaces = int(comps.labels.max()) + 1 if len(cells) and comps.labels.max() >= 0 else 0
     index = BoxIndex.build(floors_arr, np.array([c.row() for c in cells]).reshape(-1, 5))
+    refs = _refine(store, grid, p, floors_arr, band_z, cells, comps.labels, index, client)
+    plan = _RefinedPlan.build(cells, edges, comps.labels, refs, frame, p.bin_width)
+    seconds["refining"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    n_spaces = plan.n_spaces
     store.add_dimensions([
         Dimension("cell_id", "int32", "result", "over-segmented cell of space parsing (-1: none)",
                   {"name": "cell_id", "type": "int32", "description": "space parsing cell"}),
         Dimension("space_id", "int32", "result", "space (room, hallway) of the point (-1: none)",
                   {"name": "space_id", "type": "int32", "description": "space id"}),
     ])
+    sub = [(r, [(Grid.for_store(store, Frame(pt.yaw, origin), p.bin_width, p.z_bin),
+                 pt.index(tuple(floors_arr[r.floor])), first) for pt, first in zip(r.parts, firsts)])
+           for r, firsts in zip(plan.refinements, plan.firsts)]
     labelled = run_tasks(_label_tile, tiles, client=client, label="spaces: writing labels", keys=tiles,
-                         extra_args=(store, grid, share(client, index), comps.labels.astype(np.int64)))
+                         extra_args=(store, grid, share(client, index), plan.labels,
+                                     share(client, sub) if sub else sub, plan.owner))
     seconds["labelling"] = time.perf_counter() - t
 
-    parse = _assemble(store, p, frame, floors, slabs + walls, cells, edges, comps.labels, labelled, tiles,
-                      n_spaces)
+    parse = _assemble(store, p, frame, floors, slabs + walls + plan.dividers, plan.cells, plan.edges,
+                      plan.labels, labelled, tiles, n_spaces, plan)
     parse.stats = {"passes": passes, "cells": len(cells), "edges": len(edges),
                    "edges_divided": int(sum(e.divider is not None for e in edges)),
+                   "refined": [{"space": r.space, "spaces": r.n_spaces,
+                                "yaw_deg": [round(math.degrees(pt.yaw), 3) for pt in r.parts]}
+                               for r in plan.refinements],
+                   "refine_searched": len(refs),
                    "absorbed": len(comps.absorbed), "dropped": len(comps.dropped),
                    "merges_refused": len(comps.refused),
                    "seconds": {k: round(v, 3) for k, v in seconds.items()}}
@@ -413,7 +581,7 @@ def parse_spaces(store: TileStore, *, client: Client | None = None, params: Spac
 
 def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]], dividers: list[FoundDivider],
               boxes: list[Box], edges: list[Edge], labels: np.ndarray, labelled: list[dict[str, Any]],
-              tiles: list[str], n_spaces: int) -> SpaceParse:
+              tiles: list[str], n_spaces: int, plan: _RefinedPlan) -> SpaceParse:
     from engine.footprints import union_footprint
 
     bw, zb = p.bin_width, p.z_bin
@@ -435,9 +603,9 @@ def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]]
     cells = []
     for i, b in enumerate(boxes):
         cells.append(Cell(i, b.floor, [b.u0 * bw, b.v0 * bw, b.u1 * bw, b.v1 * bw], int(cell_counts[i]),
-                          int(labels[i])))
+                          int(labels[i]), plan.cell_yaw[i]))
         floor_list[b.floor].point_count += int(cell_counts[i])
-    faces = _faces(frame, boxes, edges, labels, floor_list, bw)
+    faces = _faces(frame, edges, plan.sides, plan.edge_yaw, floor_list, bw)
     nb_of: dict[int, list[int]] = defaultdict(list)
     for a, o in sorted(faces):
         nb_of[a].append(o)
@@ -449,7 +617,12 @@ def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]]
     for s in range(n_spaces):
         members = members_of[s]
         rects = [cells[i].box for i in members]
-        fp, area = union_footprint(rects, frame)
+        if s in plan.sub_of:
+            k, yaw = plan.sub_of[s]
+            fp, area = clipped_footprint(rects, Frame(yaw, frame.origin), [cells[i].box for i in plan.clip[k]],
+                                         frame)
+        else:
+            fp, area = union_footprint(rects, frame)
         nbs = [Neighbour(o, faces[(s, o)]) for o in nb_of.get(s, [])]
         zr = ([float(zmin[s]), float(zmax[s])] if np.isfinite(zmin[s])
               else list(floor_list[boxes[members[0]].floor].z_range))
@@ -459,38 +632,43 @@ def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]]
                       unassigned_points=int(sum(r["unassigned"] for r in labelled)), params=p.to_dict())
 
 
-def _faces(frame: Frame, boxes: list[Box], edges: list[Edge], labels: np.ndarray, floors: list[Floor],
+def _faces(frame: Frame, edges: list[Edge], sides: np.ndarray, edge_yaw: list[float | None], floors: list[Floor],
            bw: float) -> dict[tuple[int, int], list[Face]]:
-    """Shared faces between different spaces (both directions), contiguous pieces joined."""
+    """Shared faces between different spaces (both directions), contiguous pieces of one frame joined.
+
+    ``sides[e]``: the space on each side of edge ``e``; ``edge_yaw[e]``: its frame (None: the building's).
+    """
     pieces: dict[tuple[int, int], list[tuple]] = defaultdict(list)
-    for e in edges:
-        sa, sb = int(labels[e.a]), int(labels[e.b])
+    for e, (sa, sb), yaw in zip(edges, sides.tolist(), edge_yaw):
         if sa < 0 or sb < 0 or sa == sb:
             continue
         kind = e.divider.get("kind") if e.divider else None
         score = float(e.divider.get("score", 0.0)) if e.divider else None
         key = (min(sa, sb), max(sa, sb))
-        pieces[key].append((e.axis, e.position, e.overlap[0], e.overlap[1], e.divider is not None, kind, score,
-                            e.floor))
+        pieces[key].append((math.nan if yaw is None else float(yaw), e.axis, e.position, e.overlap[0], e.overlap[1],
+                            e.divider is not None, kind, score, e.floor))
     out: dict[tuple[int, int], list[Face]] = defaultdict(list)
     for key, items in pieces.items():
-        items.sort(key=lambda x: (x[0], x[1], x[4], x[2]))
+        items.sort(key=lambda x: (not math.isnan(x[0]), 0.0 if math.isnan(x[0]) else x[0], x[1], x[2], x[5], x[3]))
         joined: list[list] = []
         for it in items:
-            if joined and joined[-1][0] == it[0] and joined[-1][1] == it[1] and joined[-1][4] == it[4] \
-                    and joined[-1][3] == it[2]:
-                joined[-1][3] = it[3]
-                if it[6] is not None:
-                    joined[-1][6] = max(joined[-1][6] or 0.0, it[6])
+            last = joined[-1] if joined else None
+            same_frame = (math.isnan(last[0]) and math.isnan(it[0])) or last[0] == it[0] if last else False
+            if last and same_frame and last[1:3] == list(it[1:3]) and last[5] == it[5] and last[4] == it[3]:
+                last[4] = it[4]
+                if it[7] is not None:
+                    last[7] = max(last[7] or 0.0, it[7])
             else:
                 joined.append(list(it))
         faces = []
-        for axis, pos, o0, o1, div, kind, score, floor in joined:
+        for yaw, axis, pos, o0, o1, div, kind, score, floor in joined:
+            fr = frame if math.isnan(yaw) else Frame(yaw, frame.origin)
             a = pos * bw
             ends = [[a, o0 * bw], [a, o1 * bw]] if axis == 0 else [[o0 * bw, a], [o1 * bw, a]]
-            seg = frame.to_world(np.array(ends))
+            seg = fr.to_world(np.array(ends))
             faces.append(Face("u" if axis == 0 else "v", a, [o0 * bw, o1 * bw], list(floors[floor].z_range),
-                              [[float(v) for v in seg[0]], [float(v) for v in seg[1]]], bool(div), kind, score))
+                              [[float(v) for v in seg[0]], [float(v) for v in seg[1]]], bool(div), kind, score,
+                              None if math.isnan(yaw) else yaw))
         out[key] = faces
         out[(key[1], key[0])] = faces
     return out

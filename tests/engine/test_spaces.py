@@ -180,3 +180,34 @@ def test_the_generated_building_turned_by_30_degrees_gives_the_same_number_of_sp
     assert len(a.spaces) == len(b.spaces)
     assert abs((math.degrees(b.frame.yaw) - math.degrees(a.frame.yaw) - 30.0 + 45) % 90 - 45) < 0.1
     assert distributed_ari(generated[30.0], client=client) >= 0.9
+
+
+@pytest.fixture(scope="module")
+def winged(tmp_path_factory, client):
+    """A small generated building with a wing at an angle to the rest (engine.synth, difficulty ``wing``)."""
+    from engine.synth import generate
+    from tiles.store import open_store
+
+    path = tmp_path_factory.mktemp("wing") / "w.zarr"
+    generate(str(path), seed=4, area_m2=200, floors=1, density=150, yaw=10.0, hardness="wing", client=client)
+    return open_store(str(path))
+
+
+@pytest.mark.slow
+def test_a_wing_at_an_angle_is_cut_into_its_rooms(winged, client):
+    # without the refinement the wing's walls smear in the building's frame: the whole wing is one cell
+    before = parse_spaces(winged, client=client, params=SpaceParams.from_config(refine_min_area=0.0))
+    ari_before = distributed_ari(winged, client=client)
+    parse = parse_spaces(winged, client=client)
+    ari = distributed_ari(winged, client=client)
+    assert ari_before < 0.8 and ari >= 0.95
+    assert len(parse.spaces) > len(before.spaces)
+    turned = [c for c in parse.cells if c.yaw is not None]
+    assert turned, "the wing's cells are in the wing's own frame"
+    off = {round(((math.degrees(c.yaw - parse.frame.yaw) + 45) % 90 - 45), 1) for c in turned}
+    assert all(abs(o) >= 10 for o in off)  # the generator turns a wing by 15-40 degrees
+    # the document round-trips and every new space has a footprint within the building
+    again = SpaceParse.from_doc(json.loads(json.dumps(parse.to_doc())))
+    assert [c.yaw for c in again.cells] == [c.yaw for c in parse.cells]
+    assert all(s.area_m2 > 0 for s in parse.spaces)
+    assert sum(s.point_count for s in parse.spaces) + parse.unassigned_points == winged.meta.point_count
