@@ -119,8 +119,17 @@ class PointIndex:
         return self.points[base + np.arange(total)]
 
 
-def refine_extent(values: np.ndarray, lo: float, hi: float, bin_size: float, frac: float = 0.02) -> tuple[float, float]:
-    """The dense run of ``values`` around the peak of their histogram in ``[lo, hi]`` (a surface's extent)."""
+def refine_extent(values: np.ndarray, lo: float, hi: float, bin_size: float, frac: float = 0.02,
+                  sigmas: float = 3.0) -> tuple[float, float]:
+    """The extent of the surface in ``values`` around the peak of their histogram in ``[lo, hi]``.
+
+    First the dense run of the histogram (``bin_size`` bins holding at least ``frac``
+    of the peak) around its peak; then, within it, the band ``median +- sigmas``
+    robust standard deviations (1.4826 MAD) of its values: the band that holds the
+    surface's points under Gaussian scan noise (99.7 % at 3 sigma), without the few
+    stray points of things touching the surface that widen the dense run.  The band
+    is at least one bin wide.
+    """
     if len(values) == 0:
         return lo, hi
     nb = max(int(np.ceil((hi - lo) / bin_size)), 1)
@@ -133,7 +142,13 @@ def refine_extent(values: np.ndarray, lo: float, hi: float, bin_size: float, fra
     b = peak
     while b < nb - 1 and dense[b + 1]:
         b += 1
-    return lo + a * bin_size, min(lo + (b + 1) * bin_size, hi)
+    run_lo, run_hi = lo + a * bin_size, min(lo + (b + 1) * bin_size, hi)
+    v = values[(values >= run_lo) & (values <= run_hi)]
+    if len(v) < 3:
+        return run_lo, run_hi
+    med = float(np.median(v))
+    half = max(sigmas * 1.4826 * float(np.median(np.abs(v - med))), bin_size / 2)
+    return max(run_lo, med - half), min(run_hi, med + half)
 
 
 def surface_shift(values: np.ndarray, lo: int, hi: int, search_lo: int, search_hi: int, voxel: float,
@@ -267,7 +282,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         n = np.asarray(grid.shape)
         for i in range(len(lo)):
             # surfaces thinner than half a voxel (walls, floors, ceilings as seen from inside)
-            need = atoms[int(at_all_cat[i])].size_in(grid.extent)
+            atom = atoms[int(at_all_cat[i])]
+            need = np.minimum(atom.size_in(grid.extent), atom.metric_size)
             thin = np.nonzero((hi[i] - lo[i] <= settings.thin_voxels) & (need < 0.5 * vox))[0]
             for a in thin:
                 # the surface is looked for in the box grown along this axis as NMS grew it: the

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.cli import main
-from engine.detection import DetectionSettings, detect, surface_shift
+from engine.detection import DetectionSettings, detect, refine_extent, surface_shift
 from engine.labels import label_points, read_elements_json, write_elements_json
 from engine.metrics.detection import box_iou_3d, boxes_array, evaluate_detections
 from engine.model import Model, default_model_path
@@ -55,6 +55,21 @@ def test_surface_shift_moves_a_thin_box_onto_the_surface_beside_it():
     assert surface_shift(sel(29, 32), 31, 32, 29, 32, vox, bin_) == -1  # from above
     assert surface_shift(sel(27, 31), 28, 30, 27, 31, vox, bin_) == 1  # a box two voxels thick: the smallest move
     assert surface_shift(np.zeros(0), 3, 4, 2, 5, vox, bin_) == 0
+
+
+def test_refine_extent_is_the_noise_band_of_the_surface():
+    rng = np.random.default_rng(1)
+    sigma = 0.004
+    wall = 1.234 + rng.normal(0, sigma, 20000)
+    # a board's edge and a few stray points touching the wall widen the dense run, not the band
+    stray = np.concatenate([rng.uniform(1.25, 1.27, 600), rng.uniform(1.2, 1.3, 100)])
+    lo, hi = refine_extent(np.concatenate([wall, stray]), 1.2, 1.3, 0.005)
+    assert abs((lo + hi) / 2 - 1.234) < 0.002
+    assert 5 * sigma < hi - lo < 7 * sigma  # +- 3 sigma: the band holding the surface's points
+    # a noise-free plane still gets a box (one bin), and no points leave the box as it was
+    lo, hi = refine_extent(np.full(50, 1.234), 1.2, 1.3, 0.005)
+    assert lo < 1.234 < hi and 0.002 < hi - lo <= 0.005
+    assert refine_extent(np.zeros(0), 1.2, 1.3, 0.005) == (1.2, 1.3)
 
 
 def test_small_model_detects_walls_floor_and_ceiling(buildings, trained, client):
