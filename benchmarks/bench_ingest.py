@@ -10,7 +10,7 @@ format 7: x y z, intensity, returns, classification, gps_time, rgb; ``--quick``:
   backend, for scale;
 * ``ingest LAZ`` -- ``tiles.ingest.ingest`` on a 2-worker LocalCluster (one
   thread each, started before the clock): decode every part, stage it by tile,
-  write every tile (Zarr, zstd) and the metadata;
+  write every tile (Zarr, Blosc LZ4) and the metadata;
 * the same for the uncompressed LAS, whose reference (``laspy.read``) is a
   plain read of the file into memory.
 

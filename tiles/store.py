@@ -28,8 +28,16 @@ TILE_CHUNK = 1 << 20
 
 
 def tile_compressor() -> zarr.codecs.BloscCodec:
-    """The codec of the long-lived tile arrays: fast zstd with byte shuffle."""
-    return zarr.codecs.BloscCodec(cname="zstd", clevel=1, shuffle="shuffle")
+    """The codec of the long-lived tile arrays: LZ4 with bit shuffle.
+
+    Measured on the store of bench_ingest's 20 M-point cloud (22 LAS
+    dimensions, 48 tiles): 343 MB and 0.50 s of CPU to encode against 305 MB
+    and 1.09 s for zstd level 1 with byte shuffle (the former codec), and
+    about half the CPU to decode: 12 % more disk for half the codec time of
+    every write and read.  Stores written with another Blosc codec are read as
+    they are (the codec is in each array's metadata).
+    """
+    return zarr.codecs.BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle")
 
 
 def tile_name(ix: int, iy: int) -> str:
