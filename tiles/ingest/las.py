@@ -440,15 +440,22 @@ class LasReader(Reader):
                 done += n
 
     def _columns(self, arr: np.ndarray, grid: Quantization) -> PartResult:
-        raw = {"x": arr["X"], "y": arr["Y"], "z": arr["Z"]}
+        """The store's columns of decoded point records ``arr`` (contiguous arrays)."""
+        fields: list[str] = ["X", "Y", "Z"]
+        for _, how in self.extract:
+            if how[1] not in fields:
+                fields.append(how[1])
+        flat = _split_fields(arr, fields)
+        raw = {"x": flat["X"], "y": flat["Y"], "z": flat["Z"]}
         cols, worst = grid.requantize(raw, self.scales, self.offsets, self.path)
         for store_name, how in self.extract:
             if how[0] == "field":
-                cols[store_name] = np.ascontiguousarray(arr[how[1]])  # gathers from a contiguous copy are faster
+                cols[store_name] = flat[how[1]]
             elif how[0] == "bits":
-                cols[store_name] = ((arr[how[1]] & how[2]) >> _shift(how[2])).astype(np.uint8)
+                v = np.bitwise_and(flat[how[1]], how[2], dtype=np.uint8)
+                cols[store_name] = np.right_shift(v, _shift(how[2]), out=v)
             else:
-                cols[store_name] = np.ascontiguousarray(arr[how[1]][:, how[2]])
+                cols[store_name] = np.ascontiguousarray(flat[how[1]][:, how[2]])
         return PartResult(cols, {"rounding": worst})
 
     def source_info(self, stats: list[dict[str, Any]]) -> dict[str, Any]:
@@ -476,6 +483,26 @@ class LasReader(Reader):
             out.append(f"{self.path}: coordinates moved to the store's grid with rounding up to "
                        f"{info['requantized_max_error_m']:.3g} m")
         return out
+
+
+#: Records copied at a time by :func:`_split_fields` (a block of a LAS record array stays in the cache).
+SPLIT_BLOCK = 1 << 14
+
+
+def _split_fields(arr: np.ndarray, names: list[str]) -> dict[str, np.ndarray]:
+    """Contiguous copies of the fields ``names`` of the structured array ``arr``.
+
+    Copied a block of records at a time over all fields: one field after the
+    other over the whole array reads every record's cache lines once per field
+    (measured on 2 M format-7 records, 14 fields: 125 ms against 20-40 ms).
+    """
+    n = len(arr)
+    out = {f: np.empty((n, *arr.dtype[f].shape), dtype=arr.dtype[f].base) for f in names}
+    for s in range(0, n, SPLIT_BLOCK):
+        block = arr[s:s + SPLIT_BLOCK]
+        for f in names:
+            out[f][s:s + SPLIT_BLOCK] = block[f]
+    return out
 
 
 def _list(v) -> list | None:
