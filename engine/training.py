@@ -312,7 +312,7 @@ def _fit_svm(pos: np.ndarray, neg: np.ndarray, mask: np.ndarray, c: float, seed:
 
 def train(stores: list[Any], *, client=None, settings: TrainSettings | None = None,
           detection: DetectionSettings | None = None, provenance: dict[str, Any] | None = None,
-          jobs: list[TrainJob] | None = None, log=None) -> Model:
+          jobs: list[TrainJob] | None = None, log=None, names: list[str] | None = None) -> Model:
     """Train a model on ground-truth spaces of ``stores`` (or on the given ``jobs``).
 
     Parameters
@@ -329,6 +329,13 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
         Precomputed :func:`training_jobs` (a subset for cross-validation).
     log
         A callable taking one line of progress, or None.
+    names
+        A stable description of each store (``"synthetic seed 1000"``, a dataset's name) that the
+        model's provenance records instead of the stores' URLs (temporary folders would make two
+        trainings on the same data differ); default: the URLs.
+
+    The model's provenance holds only facts of the data and settings (no timestamp, no duration),
+    so that training again on the same data writes the same model.
     """
     settings = settings or TrainSettings.from_config()
     det_run = detection or DetectionSettings.from_config()
@@ -336,7 +343,7 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
     det = dataclasses.replace(det_run, max_stride=max(det_run.max_stride, settings.max_stride))
     say = log or (lambda s: None)
     t0 = time.perf_counter()
-    jobs = jobs if jobs is not None else training_jobs(stores, client=client)
+    jobs = jobs if jobs is not None else training_jobs(stores, client=client, building_names=names)
     if not jobs:
         raise UserError(None, "no ground-truth spaces to train on")
     layout = FeatureLayout(settings.k, settings.disabled)
@@ -408,20 +415,14 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
     model.provenance = dict(provenance or {})
     model.provenance.update({"spaces": len(jobs), "instances": int(len(cls)),
                              "buildings": sorted({j.building for j in jobs}),
-                             "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)},
-                             "seconds": round(time.perf_counter() - t0, 1), "trained_at": _now()})
+                             "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)}})
+    say(f"trained in {time.perf_counter() - t0:.0f} s")
     return model
 
 
 def synthetic_yaw(seed: int) -> float:
     """The yaw (degrees) of generated training building ``seed``: seeded, so that frames are exercised."""
     return float(np.random.default_rng([int(seed), 7]).uniform(0.0, 90.0))
-
-
-def _now() -> str:
-    import datetime as _dt
-
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
 
 def evaluate_on(store: Any, model: Model, *, client=None, space_array: str = "gt_space",
@@ -436,19 +437,24 @@ def evaluate_on(store: Any, model: Model, *, client=None, space_array: str = "gt
 
 
 def cross_validate(stores: list[Any], *, client=None, settings: TrainSettings | None = None,
-                   detection: DetectionSettings | None = None, log=None) -> dict[str, Any]:
+                   detection: DetectionSettings | None = None, log=None,
+                   names: list[str] | None = None) -> dict[str, Any]:
     """Building-wise folds: train without one building, evaluate on it (ground-truth spaces), for each.
+
+    ``names`` describe the stores (see :func:`train`); default: their URLs.
 
     Returns ``{"folds": [{"building", "ap": {...}, "mean_ap", ...}], "mean_ap": mean over folds}``.
     """
     if len(stores) < 2:
         raise UserError(None, "cross-validation needs at least two buildings (stores)")
     say = log or (lambda s: None)
+    names = list(names) if names is not None else [s.url for s in stores]
     folds = []
     for i, test in enumerate(stores):
         train_stores = [s for j, s in enumerate(stores) if j != i]
-        say(f"fold {i + 1}/{len(stores)}: test on {test.url}")
-        model = train(train_stores, client=client, settings=settings, detection=detection, log=log)
+        say(f"fold {i + 1}/{len(stores)}: test on {names[i]}")
+        model = train(train_stores, client=client, settings=settings, detection=detection, log=log,
+                      names=[n for j, n in enumerate(names) if j != i])
         ev, _ = evaluate_on(test, model, client=client, detection=detection)
-        folds.append({"building": test.url, **ev.to_json()})
+        folds.append({"building": names[i], **ev.to_json()})
     return {"folds": folds, "mean_ap": float(np.nanmean([f["mean_ap"] for f in folds]))}

@@ -90,6 +90,25 @@ def test_small_model_detects_walls_floor_and_ceiling(buildings, trained, client)
     assert ev.ap["floor"] > 0.5 and ev.ap["ceiling"] > 0.5 and ev.ap["wall"] > 0.5
 
 
+def test_training_again_on_the_same_data_writes_the_same_model(buildings, client, tmp_path):
+    from engine.training import TrainSettings, train
+
+    _, stores = buildings
+    settings = TrainSettings.from_config(classes=(0,), rounds=0)
+    docs = []
+    for i in range(2):
+        model = train([stores["train"]], client=client, settings=settings, names=["synthetic seed 11"],
+                      provenance={"synthetic": {"buildings": 1, "first_seed": 11}})
+        _, js = model.save(tmp_path / f"m{i}")
+        docs.append(json.loads(open(js).read()))
+    # stable descriptions, not the stores' (temporary) paths; no timestamps or durations
+    assert docs[0]["provenance"]["buildings"] == ["synthetic seed 11"]
+    assert not {"seconds", "trained_at"} & set(docs[0]["provenance"])
+    assert docs[0] == docs[1]
+    a, b = (Model.load(tmp_path / f"m{i}").arrays() for i in range(2))
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+
+
 def test_labels_and_elements_json(buildings, trained, client, tmp_path):
     _, stores = buildings
     store = stores["test"]
