@@ -146,7 +146,8 @@ class StoreBuilder:
         return [d.name for d in self.dimensions if d.name != POINT_INDEX.name]
 
     def tile_keys(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Tile indices of raw scaled-integer coordinates."""
+        """Tile indices of raw scaled-integer coordinates: ``floor((raw * scale + offset) / tile_size)``
+        in float64 (the definition; :meth:`local_tile_index` computes the same faster)."""
         out = []
         for v, i in ((x, 0), (y, 1)):
             w = np.multiply(v, self.scale[i], dtype=np.float64)
@@ -154,6 +155,50 @@ class StoreBuilder:
             w /= self.tile_size
             out.append(np.floor(w, out=w).astype(np.int64))
         return out[0], out[1]
+
+    def _tile_of(self, raw: int, axis: int) -> int:
+        """:meth:`tile_keys` of one raw integer (the same float64 operations, in Python floats)."""
+        return math.floor((float(raw) * self.scale[axis] + self.offset[axis]) / self.tile_size)
+
+    def local_tile_index(self, v: np.ndarray, axis: int) -> tuple[np.ndarray, int, int]:
+        """The tile index along ``axis`` of every raw coordinate ``v``, as :meth:`tile_keys` gives it, but
+        relative to the first tile: ``(index - first, first, count of tiles spanned)``.
+
+        Computed from the exact thresholds (the smallest raw value of each tile
+        after the first, found with the float formula, which is monotonic), so
+        that the per-point work is integer: one ``floor_divide`` when the
+        thresholds are evenly spaced (a tile is a whole number of raw steps),
+        else a ``searchsorted``.
+        """
+        lo, hi = int(v.min()), int(v.max())
+        first, last = self._tile_of(lo, axis), self._tile_of(hi, axis)
+        m = last - first
+        if m == 0:
+            return np.zeros(len(v), dtype=np.uint16), first, 1
+        if m >= 1 << 12:  # a part spanning thousands of tiles: the formula itself
+            w = np.multiply(v, self.scale[axis], dtype=np.float64)
+            w += self.offset[axis]
+            w /= self.tile_size
+            return (np.floor(w, out=w) - first).astype(np.int64), first, m + 1
+        step = self.tile_size / self.scale[axis]
+        thresholds = []
+        for k in range(first + 1, last + 1):
+            r = max(lo, min(hi, math.ceil((k * self.tile_size - self.offset[axis]) / self.scale[axis])))
+            while r > lo and self._tile_of(r - 1, axis) >= k:
+                r -= 1
+            while self._tile_of(r, axis) < k:
+                r += 1
+            thresholds.append(r)
+        t = np.asarray(thresholds, dtype=np.int64)
+        q = int(t[1] - t[0]) if m > 1 else max(int(round(step)), 1)
+        t0 = int(t[0])
+        if (hi - lo < 1 << 30 and q > 0 and np.all(t == t0 + q * np.arange(m))
+                and t0 - q <= lo and hi < t0 + q * m):
+            idx = np.subtract(v, t0, dtype=np.int32) if v.dtype.itemsize <= 4 else v.astype(np.int64) - t0
+            idx //= q
+            idx += 1
+            return idx.astype(np.uint16), first, m + 1
+        return np.searchsorted(t, v, side="right").astype(np.uint16), first, m + 1
 
     def write_part(self, part_id: int, columns: dict[str, np.ndarray]) -> PartSummary:
         """Stage one part's points sorted by tile (stable); runs on a worker.
@@ -172,14 +217,20 @@ class StoreBuilder:
         summary = PartSummary(part_id, n)
         if n == 0:
             return summary
-        ix, iy = self.tile_keys(columns["x"], columns["y"])
-        x0, y0 = ix.min(), iy.min()
-        key = (ix - x0) * (iy.max() - y0 + 1) + (iy - y0)
+        kx, x0, nx = self.local_tile_index(columns["x"], 0)
+        ky, y0, ny = self.local_tile_index(columns["y"], 1)
+        if nx * ny <= 1 << 16:
+            key = kx.astype(np.uint16)
+            key *= np.uint16(ny)  # < nx * ny: no overflow
+            key += ky.astype(np.uint16, copy=False)
+        else:
+            key = kx.astype(np.int64) * ny + ky
         # numpy's stable sort of 16-bit keys is a radix sort: O(n) for parts spanning < 65536 tiles
-        order = np.argsort(key.astype(np.uint16) if key.max() < 65536 else key, kind="stable")
-        skey = key[order]
-        starts = np.flatnonzero(np.r_[True, skey[1:] != skey[:-1]])
-        counts = np.diff(np.r_[starts, n])
+        order = np.argsort(key, kind="stable")
+        per_key = np.bincount(key, minlength=nx * ny)
+        used = np.flatnonzero(per_key)
+        counts = per_key[used]
+        starts = np.cumsum(per_key)[used] - counts
         values = {}
         for d in self.dimensions:
             if d.name == POINT_INDEX.name:
@@ -204,7 +255,7 @@ class StoreBuilder:
         mins = {a: np.minimum.reduceat(sorted_xyz[a], starts) for a in "xyz"}
         maxs = {a: np.maximum.reduceat(sorted_xyz[a], starts) for a in "xyz"}
         _write_staging(self, part_id, blob)
-        tix, tiy = ix[order[starts]], iy[order[starts]]
+        tix, tiy = x0 + used // ny, y0 + used % ny
         for j in range(len(starts)):
             summary.tiles[(int(tix[j]), int(tiy[j]))] = (
                 int(starts[j]), int(counts[j]),

@@ -123,3 +123,25 @@ def test_constant_arrays_are_not_staged_and_keep_every_bit(tmp_path):
     np.testing.assert_array_equal(back["gps_time"][order].view(np.uint64), gps.view(np.uint64))
     np.testing.assert_array_equal(back["flag"][order], flag)
     np.testing.assert_array_equal(back["x"][order], cols["x"])
+
+
+@pytest.mark.parametrize("scale,offset,tile,span", [
+    (0.001, 0.0, 10.0, 40_000), (0.0005, 500_000.0, 10.0, 150_000), (0.0003, -12.345, 7.0, 90_000),
+    (0.01, 4_000_000.0, 10.0, 5_000), (0.001, 0.0, 0.25, 3_000), (0.0001, 123.0, 20.0, 10),
+    (0.001, 0.0, 0.001, 9_000)])
+def test_local_tile_index_equals_the_float_formula(tmp_path, scale, offset, tile, span):
+    """The integer shortcut gives exactly the tile of ``floor((raw * scale + offset) / tile)``, also on and
+    next to every tile boundary and for parts that do not start on one."""
+    b = StoreBuilder.create(str(tmp_path / "k.zarr"), dimensions=DIMS, scale=[scale] * 3,
+                            offset=[offset] * 3, tile_size=tile)
+    rng = np.random.default_rng(int(span))
+    base = int(rng.integers(-10 ** 6, 10 ** 6))
+    raw = base + rng.integers(0, span, 20_000)
+    # every raw value within 2 steps of each tile boundary of the range
+    ks = np.arange(np.floor((raw.min() * scale + offset) / tile), np.floor((raw.max() * scale + offset) / tile) + 2)
+    near = np.round((ks * tile - offset) / scale).astype(np.int64)[:, None] + np.arange(-2, 3)
+    raw = np.concatenate([raw, near.ravel()]).astype(np.int32)
+    expect, _ = b.tile_keys(raw, raw)
+    idx, first, count = b.local_tile_index(raw, 0)
+    np.testing.assert_array_equal(idx.astype(np.int64) + first, expect)
+    assert first == expect.min() and count == expect.max() - expect.min() + 1
