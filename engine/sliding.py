@@ -125,16 +125,30 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
     Equal, to rounding, to ``window_features(...) @ weights + bias`` for each window
     (tested); ``weights`` are the full layout's (masked groups are ignored).
     """
+    return score_windows_many(vol, shape, np.asarray(weights)[None], np.array([bias], dtype=np.float64), layout,
+                              stride, min_points, max_stride)[0]
+
+
+def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias: np.ndarray,
+                       layout: FeatureLayout, stride: float, min_points: int = 10,
+                       max_stride: float | None = None) -> list[WindowScores]:
+    """:func:`score_windows` of one window shape for several linear models ``(m, F)`` at once.
+
+    The features of the windows (the box sums and local features of their
+    sub-boxes, most of the cost) are computed once for all ``m`` weight vectors:
+    for the atoms of a dictionary whose windows have the same voxel shape in a
+    space (the same or different classes).  ``bias`` is ``(m,)``.
+    """
     k = layout.k
     k3 = k ** 3
     grid = vol.grid
     n = np.asarray(grid.shape)
     shape = np.minimum(np.asarray(shape, dtype=np.int64), n)
-    w = np.where(layout.mask, np.asarray(weights, dtype=np.float64), 0.0)
-    wg = w[:layout.n_global]
-    wl = w[layout.n_global:].reshape(k3, -1)  # (K^3, 9) per slot, x-major
-    w_lin = wl.copy()
-    w_lin[:, 1] = 0.0  # the ratio is added per window at the end
+    w = np.where(layout.mask, np.asarray(weights, dtype=np.float64).reshape(-1, layout.size), 0.0)
+    m = len(w)
+    bias = np.asarray(bias, dtype=np.float64).reshape(m)
+    wg = w[:, :layout.n_global]
+    wl = w[:, layout.n_global:].reshape(m, k3, -1)  # (m, K^3, 9) per slot, x-major
     px, py, pz = window_positions(grid, shape, stride, max_stride)
     ux, ix = _intervals(px, int(shape[0]), k)
     uy, iy = _intervals(py, int(shape[1]), k)
@@ -143,12 +157,14 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
     win = lambda p, s: np.stack([p, p + s], axis=1)  # noqa: E731
     counts = mom.box_sums_grid(vol.iv[..., :1], win(px, shape[0]), win(py, shape[1]), win(pz, shape[2]))[..., 0]
     valid = counts >= min_points
-    lin = np.zeros(counts.shape + (2,))  # the linear part, the ratio's weighted raw counts
+    acc = np.zeros(counts.shape + (2 * m,))  # per model: the linear part, then the ratio's weighted raw counts
     if valid.any():
         vi = np.nonzero(valid)
         lo = np.stack([px[vi[0]], py[vi[1]], pz[vi[2]]], axis=-1)
         size = np.broadcast_to(shape, lo.shape)
-        lin[..., 0][valid] = global_features(lo / n, size / n, size * grid.voxel) @ wg + float(bias)
+        g = global_features(lo / n, size / n, size * grid.voxel)
+        for j in range(m):
+            acc[..., j][valid] = g @ wg[j] + bias[j]
     # local part, in batches of x positions so that the sub-box table stays bounded.  Only the
     # occupied sub-boxes get local features (they are all zero elsewhere; in a room most sub-boxes
     # are air).  A slot's term is linear in its sub-box's features: for each pair of slots along
@@ -157,10 +173,13 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
     # weights along that axis, and the K scalars are then gathered along it.
     per_x = max(1, SUBBOX_BATCH // max(len(uy) * len(uz), 1))
     occupied = max(int(layout.min_points), 1)
-    # weights (K, K, K, 9, 2): the linear part and the ratio's raw-count column
-    w2 = np.zeros((k, k, k, LOCAL_SIZE, 2))
-    w2[..., 0] = w_lin.reshape(k, k, k, -1)
-    w2[..., 1, 1] = wl[:, 1].reshape(k, k, k)
+    # weights (K, K, K, 9, 2m): each model's linear part (ratio excluded: it is divided by the
+    # window's count at the end), then each model's weight of the raw count
+    w2 = np.zeros((k, k, k, LOCAL_SIZE, 2 * m))
+    for j in range(m):
+        w2[..., j] = wl[j].reshape(k, k, k, -1)
+        w2[..., 1, j] = 0.0
+        w2[..., 1, m + j] = wl[j, :, 1].reshape(k, k, k)
     for s in range(0, len(px), per_x):
         sl = slice(s, s + per_x)
         need, sub_ix = np.unique(ix[sl], return_inverse=True)
@@ -171,12 +190,10 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
         part = local_features(sums[occ], np.ones(int(occ.sum())), k, layout.min_points)
         part[:, 1] = sums[occ][:, 0]  # raw count: ratio = count / window count
         feats[occ] = part
-        lin[sl] += _slot_sums(feats, (sub_ix, iy, iz), w2, k)
-    ratio = lin[..., 1]
-    lin = lin[..., 0]
-    scores = lin + ratio / np.maximum(counts, 1.0) * k3
-    scores = np.where(valid, scores, -np.inf)
-    return WindowScores(shape, px, py, pz, scores, counts)
+        acc[sl] += _slot_sums(feats, (sub_ix, iy, iz), w2, k)
+    n_win = np.maximum(counts, 1.0)
+    return [WindowScores(shape, px, py, pz, np.where(valid, acc[..., j] + acc[..., m + j] / n_win * k3, -np.inf),
+                         counts) for j in range(m)]
 
 
 def box_iou(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.ndarray) -> np.ndarray:

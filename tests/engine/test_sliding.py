@@ -7,7 +7,7 @@ import pytest
 import engine.sliding as sliding
 from engine.canonical import CanonicalFrame
 from engine.features import FeatureLayout, SpaceVolume, window_features
-from engine.sliding import _slot_sums, score_windows
+from engine.sliding import _slot_sums, score_windows, score_windows_many
 
 
 def _room(rng, n=40000, extent=(3.0, 2.4, 2.2)):
@@ -73,3 +73,22 @@ def test_slot_sums_equal_the_sum_over_slots(last):
     got = _slot_sums(feats, index, w2, k)
     assert got.shape == want.shape
     assert np.allclose(got, want, rtol=0, atol=1e-12)
+
+
+def test_many_models_share_the_features_and_score_each_as_alone(monkeypatch):
+    monkeypatch.setattr(sliding, "SUBBOX_BATCH", 900)
+    rng = np.random.default_rng(11)
+    vol = _room(rng)
+    lay = FeatureLayout(k=4, min_points=2)
+    w = rng.normal(size=(3, lay.size))
+    b = np.array([0.5, -1.0, 2.0])
+    many = score_windows_many(vol, np.array([8, 4, 7]), w, b, lay, stride=0.25, min_points=10, max_stride=0.2)
+    assert len(many) == 3
+    for j in range(3):
+        one = score_windows(vol, np.array([8, 4, 7]), w[j], b[j], lay, stride=0.25, min_points=10, max_stride=0.2)
+        assert np.array_equal(np.isneginf(many[j].scores), np.isneginf(one.scores))
+        ok = np.isfinite(one.scores)
+        assert ok.sum() > 10
+        assert np.allclose(many[j].scores[ok], one.scores[ok], rtol=0, atol=1e-12)
+        assert np.array_equal(many[j].counts, one.counts) and np.array_equal(many[j].px, one.px)
+    assert not np.allclose(many[0].scores[ok], many[1].scores[ok])
