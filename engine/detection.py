@@ -10,7 +10,9 @@ For every space (one task each, its points gathered from the tiles it touches):
    windows above ``score-threshold``, the ``pre-nms`` best per window shape;
 4. per class, non-maximum suppression (3D IoU ``nms-iou`` of the boxes grown
    to at least ``nms-min-size`` metres, so that parallel slivers of one surface
-   suppress each other), at most ``max-per-class`` proposals;
+   suppress each other), at most ``max-per-class`` proposals, and only the best
+   one of the classes a space has exactly one of (``one-per-space``: its floor
+   and its ceiling);
 5. thin-box refinement: along an axis where a detection is at most
    ``thin-voxels`` voxels thick and its window's learned size is under half a
    voxel (surfaces seen from one side: walls, floors, ceilings), its extent
@@ -61,6 +63,7 @@ class DetectionSettings:
     nms_iou: float = 0.3
     nms_min_size: float = 0.3
     max_per_class: int = 30
+    one_per_space: tuple[str, ...] = ("ceiling", "floor")
     local_search: bool = True
     refine: bool = True
     thin_voxels: int = 2
@@ -78,6 +81,12 @@ class DetectionSettings:
             raise ValueError("max-per-class and pre-nms must be >= 1")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
+        if isinstance(self.one_per_space, str):
+            self.one_per_space = tuple(c.strip() for c in self.one_per_space.split(",") if c.strip())
+        self.one_per_space = tuple(self.one_per_space)
+        bad = [c for c in self.one_per_space if c not in ELEMENT_CLASSES]
+        if bad:
+            raise ValueError(f"one-per-space: unknown element class(es) {', '.join(bad)}")
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "DetectionSettings":
@@ -86,12 +95,12 @@ class DetectionSettings:
         for f in fields(cls):
             v = config.get(f"detection.{f.name.replace('_', '-')}")
             if v is not None:
-                kw[f.name] = type(f.default)(v)
+                    kw[f.name] = v if isinstance(f.default, tuple) else type(f.default)(v)
         kw.update(overrides)
         return cls(**kw)
 
     def to_json(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v) for f in fields(self)}
 
 
 class PointIndex:
@@ -268,6 +277,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                                       settings.stride, settings.max_stride)
             pad = np.clip(np.ceil(settings.nms_min_size / grid.voxel) - (hi - lo), 0, None) / 2.0
             keep = non_maximum_suppression(lo - pad, hi + pad, sc, settings.nms_iou, settings.max_per_class)
+        if ELEMENT_CLASSES[c] in settings.one_per_space:
+            keep = keep[:1]  # a space has one floor and one ceiling: the best window of the class
         lo_all.append(lo[keep]), hi_all.append(hi[keep]), sc_all.append(sc[keep])
         cl_all.append(np.full(len(keep), c)), at_all.append(at[keep])
     if not lo_all:

@@ -72,11 +72,23 @@ def test_refine_extent_is_the_noise_band_of_the_surface():
     assert refine_extent(np.zeros(0), 1.2, 1.3, 0.005) == (1.2, 1.3)
 
 
+def test_one_per_space_setting():
+    assert DetectionSettings.from_config().one_per_space == ("ceiling", "floor")
+    assert DetectionSettings(one_per_space="wall, floor").one_per_space == ("wall", "floor")
+    assert DetectionSettings(one_per_space=()).to_json()["one_per_space"] == []
+    with pytest.raises(ValueError, match="one-per-space"):
+        DetectionSettings(one_per_space=("stairs",))
+
+
 def test_small_model_detects_walls_floor_and_ceiling(buildings, trained, client):
     _, stores = buildings
     store = stores["test"]
     props = detect(store, model=trained, client=client, space_array="gt_space")
     assert props and {p.class_name for p in props} <= set(STRUCTURE)
+    # one floor and one ceiling per space (one-per-space), several walls
+    per_space = [(p.space_id, p.class_name) for p in props]
+    assert all(per_space.count((s, c)) == 1 for s, c in set(per_space) if c in ("floor", "ceiling"))
+    assert max(per_space.count(k) for k in set(per_space)) > 1
     gt = [e for e in store.doc("ground_truth")["elements"] if e["class"] in STRUCTURE and e.get("points", 1) >= 500]
     found = {}
     for e in gt:
