@@ -59,6 +59,19 @@ class PartSummary:
     constants: dict[str, Any] = field(default_factory=dict)
 
 
+@dataclass
+class TileOrder:
+    """The stable order of a part's points by tile (:meth:`StoreBuilder.tile_order`)."""
+
+    #: positions in the part, tile run after tile run
+    order: np.ndarray
+    #: per tile run: first position in ``order``, point count, tile indices
+    starts: np.ndarray
+    counts: np.ndarray
+    ix: np.ndarray
+    iy: np.ndarray
+
+
 class StoreBuilder:
     """Writes a new tile store; send it to workers as a task argument (it pickles small).
 
@@ -200,25 +213,10 @@ class StoreBuilder:
             return idx.astype(np.uint16), first, m + 1
         return np.searchsorted(t, v, side="right").astype(np.uint16), first, m + 1
 
-    def write_part(self, part_id: int, columns: dict[str, np.ndarray]) -> PartSummary:
-        """Stage one part's points sorted by tile (stable); runs on a worker.
-
-        Each array is gathered in tile order straight into its place in the
-        part's staging file (see :meth:`staging_layout`); an array whose every
-        value has the same bits is not staged, its value goes in the summary.
-        """
-        missing = set(self.stored_names) - set(columns)
-        extra = set(columns) - set(self.stored_names)
-        if missing or extra:
-            raise ValueError(f"part {part_id}: missing {sorted(missing)}, unexpected {sorted(extra)}")
-        n = len(columns["x"])
-        if any(len(v) != n for v in columns.values()):
-            raise ValueError(f"part {part_id}: columns of different lengths")
-        summary = PartSummary(part_id, n)
-        if n == 0:
-            return summary
-        kx, x0, nx = self.local_tile_index(columns["x"], 0)
-        ky, y0, ny = self.local_tile_index(columns["y"], 1)
+    def tile_order(self, x: np.ndarray, y: np.ndarray) -> TileOrder:
+        """The stable order of points by tile, from their raw x and y (see :class:`TileOrder`)."""
+        kx, x0, nx = self.local_tile_index(x, 0)
+        ky, y0, ny = self.local_tile_index(y, 1)
         if nx * ny <= 1 << 16:
             key = kx.astype(np.uint16)
             key *= np.uint16(ny)  # < nx * ny: no overflow
@@ -230,7 +228,35 @@ class StoreBuilder:
         per_key = np.bincount(key, minlength=nx * ny)
         used = np.flatnonzero(per_key)
         counts = per_key[used]
-        starts = np.cumsum(per_key)[used] - counts
+        return TileOrder(order, np.cumsum(per_key)[used] - counts, counts, x0 + used // ny, y0 + used % ny)
+
+    def write_part(self, part_id: int, columns: dict[str, np.ndarray],
+                   order: TileOrder | None = None) -> PartSummary:
+        """Stage one part's points sorted by tile (stable); runs on a worker.
+
+        Each array is gathered in tile order straight into its place in the
+        part's staging file (see :meth:`staging_layout`); an array whose every
+        value has the same bits is not staged, its value goes in the summary.
+        With ``order`` (:meth:`tile_order` of the part's x and y) the columns are
+        already in that order (point ``j`` is the part's point ``order.order[j]``):
+        a reader that can sort its records whole does so more cheaply than one
+        gather per column.
+        """
+        missing = set(self.stored_names) - set(columns)
+        extra = set(columns) - set(self.stored_names)
+        if missing or extra:
+            raise ValueError(f"part {part_id}: missing {sorted(missing)}, unexpected {sorted(extra)}")
+        n = len(columns["x"])
+        if any(len(v) != n for v in columns.values()):
+            raise ValueError(f"part {part_id}: columns of different lengths")
+        summary = PartSummary(part_id, n)
+        if n == 0:
+            return summary
+        presorted = order is not None
+        if order is None:
+            order = self.tile_order(columns["x"], columns["y"])
+        elif len(order.order) != n:
+            raise ValueError(f"part {part_id}: a tile order of {len(order.order)} points for {n}")
         values = {}
         for d in self.dimensions:
             if d.name == POINT_INDEX.name:
@@ -242,27 +268,34 @@ class StoreBuilder:
             else:
                 values[d.name] = v
         layout = self.staging_layout(n, summary.constants)
-        blob = np.empty(layout[-1][2] + n * layout[-1][1].itemsize, dtype=np.uint8)
-        sorted_xyz = {}
-        for name, dt, off in layout:
-            dst = blob[off:off + n * dt.itemsize].view(dt)
-            if name == POINT_INDEX.name:
-                dst[:] = order
-            else:
-                np.take(values[name], order, out=dst, mode="clip")  # "clip": unbuffered, order is in range
-            if name in ("x", "y", "z"):
-                sorted_xyz[name] = dst
+        if presorted:
+            index_dtype = next(dt for name, dt, _ in layout if name == POINT_INDEX.name)
+            values[POINT_INDEX.name] = order.order.astype(index_dtype)
+            staged = to_write = [values[name] for name, _, _ in layout]
+        else:
+            blob = np.empty(layout[-1][2] + n * layout[-1][1].itemsize, dtype=np.uint8)
+            staged = []
+            for name, dt, off in layout:
+                dst = blob[off:off + n * dt.itemsize].view(dt)
+                if name == POINT_INDEX.name:
+                    dst[:] = order.order
+                else:
+                    np.take(values[name], order.order, out=dst, mode="clip")  # "clip": unbuffered; in range
+                staged.append(dst)
+            to_write = [blob]
+        sorted_xyz = {name: a for (name, _, _), a in zip(layout, staged) if name in ("x", "y", "z")}
+        starts = order.starts
         mins = {a: np.minimum.reduceat(sorted_xyz[a], starts) for a in "xyz"}
         maxs = {a: np.maximum.reduceat(sorted_xyz[a], starts) for a in "xyz"}
-        _write_staging(self, part_id, blob)
-        tix, tiy = x0 + used // ny, y0 + used % ny
+        _write_staging(self, part_id, to_write)
         for j in range(len(starts)):
-            summary.tiles[(int(tix[j]), int(tiy[j]))] = (
-                int(starts[j]), int(counts[j]),
+            summary.tiles[(int(order.ix[j]), int(order.iy[j]))] = (
+                int(starts[j]), int(order.counts[j]),
                 [int(mins[a][j]) for a in "xyz"], [int(maxs[a][j]) for a in "xyz"])
         rgb = [c for c in ("red", "green", "blue") if c in columns]
         if rgb:
-            summary.color_max = int(max(int(np.max(columns[c])) for c in rgb))
+            summary.color_max = max(summary.constants[c] if c in summary.constants else int(np.max(values[c]))
+                                    for c in rgb)
         return summary
 
     # -- step 2: one task per tile, then the metadata -------------------------------------
@@ -376,20 +409,23 @@ def _staging_url(builder: StoreBuilder, part_id: int) -> str:
     return paths.local_path(url) if paths.is_local(url) else url
 
 
-def _write_staging(builder: StoreBuilder, part_id: int, blob: np.ndarray) -> None:
-    """Write a part's staging bytes as one raw file (private to the build, removed by :meth:`finalize`).
+def _write_staging(builder: StoreBuilder, part_id: int, arrays: list[np.ndarray]) -> None:
+    """Write a part's staged arrays one after another as one raw file (private to the build, removed by
+    :meth:`finalize`).
 
     Raw rather than a compressed Zarr array: the bytes are written once and read
     once, in ranges, by the tile tasks; codecs and sharding cost more CPU than
     they save I/O (see benchmarks/bench_ingest.py).
     """
     url = _staging_url(builder, part_id)
+    views = [memoryview(np.ascontiguousarray(a)).cast("B") for a in arrays]
     if paths.is_local(url):
         with open(url, "wb") as f:
-            f.write(memoryview(blob))
+            for v in views:
+                f.write(v)
     else:
         fs, p = paths.filesystem(url, builder.storage_options)
-        fs.pipe_file(p, memoryview(blob).tobytes())
+        fs.pipe_file(p, b"".join(views))
 
 
 def _read_staging(builder: StoreBuilder, part_id: int, ranges: list[tuple[int, int]],

@@ -35,6 +35,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import dask
+import numpy as np
 
 from tiles import paths
 from tiles.builder import StoreBuilder
@@ -170,9 +171,15 @@ def _stage(item, builder: StoreBuilder, grid: Quantization):
         return [(None, res.stats) for res in reader.read(spec, grid)]
     out = []
     for k, res in enumerate(reader.read(spec, grid)):
+        order = None
+        if res.records is not None:  # sort the records whole, then unpack them (see PartResult)
+            order = builder.tile_order(res.columns["x"], res.columns["y"])
+            rec = np.ascontiguousarray(res.records)
+            rec = np.take(rec.view(f"V{rec.dtype.itemsize}"), order.order).view(rec.dtype)
+            res = res.unpack(rec)
         n = len(res.columns["x"])
         cols = complete_columns(res.columns, builder.dimensions, n)
-        out.append((builder.write_part(first_part + k, cols), res.stats))
+        out.append((builder.write_part(first_part + k, cols, order=order), res.stats))
     if len(out) != expected:
         raise RuntimeError(f"{reader.path}: read {len(out)} parts, planned {expected}")
     return out

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Any, BinaryIO
 
 import fsspec
@@ -48,15 +49,19 @@ class Quantization:
             out[a] = v.astype(np.int32)
         return out
 
-    def requantize(self, raw: dict[str, np.ndarray], scale, offset, path: str) -> tuple[dict[str, np.ndarray], float]:
+    def requantize(self, raw: dict[str, np.ndarray], scale, offset, path: str,
+                   axes: str = "xyz") -> tuple[dict[str, np.ndarray], float]:
         """Raw integers of another grid to this one; also the largest rounding error in metres.
 
         When this scale divides the other and the offsets differ by whole steps
-        the mapping is exact integer arithmetic (error 0).
+        the mapping is exact integer arithmetic (error 0).  Only ``axes`` are
+        converted (``raw`` needs only those).
         """
         out: dict[str, np.ndarray] = {}
         worst = 0.0
         for i, a in enumerate("xyz"):
+            if a not in axes:
+                continue
             s, o = float(scale[i]), float(offset[i])
             if s == self.scale[i] and o == self.offset[i]:
                 out[a] = np.asarray(raw[a], dtype=np.int32)
@@ -79,10 +84,20 @@ class Quantization:
 
 @dataclass
 class PartResult:
-    """What reading one part gives: its columns and facts for the source report."""
+    """What reading one part gives: its columns and facts for the source report.
+
+    A reader whose points come as one record array may instead give the
+    records not yet unpacked (``records``), with ``columns`` holding only
+    ``x`` and ``y`` on the store's grid and ``unpack(records)`` giving the
+    full result of any reordering of them: the records are then sorted by tile
+    whole (one gather) before they are unpacked, cheaper than one gather per
+    column.
+    """
 
     columns: dict[str, np.ndarray]
     stats: dict[str, Any] = field(default_factory=dict)
+    records: np.ndarray | None = None
+    unpack: Callable[[np.ndarray], "PartResult"] | None = None
 
 
 class Reader:

@@ -25,6 +25,7 @@ plain LAZ).
 from __future__ import annotations
 
 import base64
+import functools
 import math
 from collections.abc import Iterator
 from typing import Any
@@ -401,7 +402,7 @@ class LasReader(Reader):
                 if f.readinto(memoryview(buf)) != count * self.record_length:
                     raise UserError(self.path, f"truncated: points {start:,}-{start + count:,} are missing")
                 arr = buf.view(self.dtype)
-        yield self._columns(arr, grid)
+        yield self._records_part(arr, grid)
 
     def _decode(self, f, start: int, count: int, byte_start: int, nbytes: int, table: list) -> np.ndarray:
         """Decompress whole LAZ chunks (lazrs with the chunk table: exact for fixed and variable chunks)."""
@@ -437,8 +438,14 @@ class LasReader(Reader):
                 if len(rec) != n:
                     raise UserError(self.path, f"truncated: decoded {done + len(rec):,} of "
                                                f"{self.expected_count:,} points")
-                yield self._columns(rec.array, grid)
+                yield self._records_part(rec.array, grid)
                 done += n
+
+    def _records_part(self, arr: np.ndarray, grid: Quantization) -> PartResult:
+        """The part as its records with x and y on the store's grid (see :class:`PartResult`)."""
+        flat = _split_fields(arr, ["X", "Y"])
+        xy, _ = grid.requantize({"x": flat["X"], "y": flat["Y"]}, self.scales, self.offsets, self.path, axes="xy")
+        return PartResult(xy, {}, records=arr, unpack=functools.partial(self._columns, grid=grid))
 
     def _columns(self, arr: np.ndarray, grid: Quantization) -> PartResult:
         """The store's columns of decoded point records ``arr`` (contiguous arrays)."""
