@@ -52,9 +52,9 @@ def _world_bounds(b: dict[str, np.ndarray], margin: float) -> np.ndarray:
     return np.concatenate([b["center"] - h, b["center"] + h], axis=1)
 
 
-#: Candidate (point, box) pairs tested at once (bounds the memory of a batch: ~100 bytes each).
+#: (cell, box) entries of the bucket grid built at once (bounds the memory of a batch: ~100 bytes each).
 PAIR_BATCH = 2_000_000
-#: Points whose grid cells are looked up at once.
+#: Points labelled at once (bounds the memory of a batch: ~100 bytes each).
 POINT_BATCH = 1_000_000
 #: (cell, box) entries the bucket grid may hold; its cells grow until the boxes fit.
 CELL_BUDGET = 8_000_000
@@ -146,8 +146,8 @@ def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *
 
     The boxes are bucketed into a grid of ``cell`` metres (coarsened when the
     boxes are many and large) and each point is tested only against the boxes
-    of its cell, in batches: the work is linear in points plus boxes (times the
-    boxes per cell), not their product.
+    of its cell, best first, until one holds it; points go in batches: the work
+    is linear in points plus boxes (times the boxes per cell), not their product.
 
     Parameters
     ----------
@@ -196,29 +196,20 @@ def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *
         else:
             first = np.searchsorted(e_cell, flat, side="left")
             count = np.searchsorted(e_cell, flat, side="right") - first
-        ends = np.cumsum(count)
-        # sub-batches of consecutive points holding at most PAIR_BATCH candidate pairs
-        j = 0
-        while j < len(p_all):
-            base = int(ends[j - 1]) if j else 0
-            stop = max(int(np.searchsorted(ends, base + PAIR_BATCH, side="right")), j + 1)
-            cnt = count[j:stop]
-            total = int(cnt.sum())
-            if total:
-                pt = np.repeat(np.arange(j, stop), cnt)
-                pos = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt) + np.repeat(first[j:stop], cnt)
-                bi = e_box[pos]
-                hit = _contains(p_all[pt], bi, bx, bounds, cos, sin, margin)
-                if space is not None:
-                    hit &= space[s + pt] == box_space[bi]
-                pt, bi = pt[hit], bi[hit]
-                # pairs run by point, then by rank: a point's first hit is its best box
-                lead = np.ones(len(pt), dtype=bool)
-                lead[1:] = pt[1:] != pt[:-1]
-                pt, bi = pt[lead] + s, bi[lead]
-                cls[pt] = bx["cls"][bi]
-                eid[pt] = bx["eid"][bi]
-            j = stop
+        # rounds: each point still unlabelled is tested against its next candidate (its cell's
+        # boxes run best first), so that a point stops at its first hit, its best box
+        active = np.nonzero(count > 0)[0]
+        r = 0
+        while len(active):
+            bi = e_box[first[active] + r]
+            hit = _contains(p_all[active], bi, bx, bounds, cos, sin, margin)
+            if space is not None:
+                hit &= space[s + active] == box_space[bi]
+            done = active[hit]
+            cls[s + done] = bx["cls"][bi[hit]]
+            eid[s + done] = bx["eid"][bi[hit]]
+            r += 1
+            active = active[~hit & (count[active] > r)]
     return cls, eid
 
 
