@@ -13,10 +13,13 @@ from engine.sliding import _slot_sums, score_windows, score_windows_many
 def _room(rng, n=40000, extent=(3.0, 2.4, 2.2)):
     """Points on a room's floor, two walls and a table top, plus sparse clutter: most sub-boxes are air."""
     e = np.asarray(extent)
-    parts = [np.column_stack([rng.uniform(0, e[0], n // 4), rng.uniform(0, e[1], n // 4), rng.normal(0.02, 0.005, n // 4)]),
-             np.column_stack([rng.normal(0.03, 0.005, n // 4), rng.uniform(0, e[1], n // 4), rng.uniform(0, e[2], n // 4)]),
-             np.column_stack([rng.uniform(0, e[0], n // 4), rng.normal(e[1] - 0.04, 0.005, n // 4), rng.uniform(0, e[2], n // 4)]),
-             np.column_stack([rng.uniform(1.0, 1.8, n // 8), rng.uniform(0.6, 1.2, n // 8), rng.normal(0.75, 0.004, n // 8)]),
+    q = n // 4
+    u = lambda lo, hi, m=q: rng.uniform(lo, hi, m)  # noqa: E731
+    g = lambda mu, m=q: rng.normal(mu, 0.005, m)  # noqa: E731
+    parts = [np.column_stack([u(0, e[0]), u(0, e[1]), g(0.02)]),  # floor
+             np.column_stack([g(0.03), u(0, e[1]), u(0, e[2])]),  # wall x = 0
+             np.column_stack([u(0, e[0]), g(e[1] - 0.04), u(0, e[2])]),  # wall y = max
+             np.column_stack([u(1.0, 1.8, q // 2), u(0.6, 1.2, q // 2), g(0.75, q // 2)]),  # table top
              rng.uniform(0, e, (200, 3))]
     xyz = np.clip(np.concatenate(parts), 0, e)
     rgb = rng.uniform(0, 1, (len(xyz), 3))
