@@ -263,7 +263,7 @@ class StoreBuilder:
                 continue
             v = np.asarray(columns[d.name]).astype(d.dtype, copy=False)
             bits = v.view(f"u{v.dtype.itemsize}")
-            if bits[0] == bits.min() == bits.max() and d.name not in ("x", "y", "z"):
+            if d.name not in ("x", "y", "z") and bits[0] == bits.min() == bits.max():
                 summary.constants[d.name] = int(bits[0])
             else:
                 values[d.name] = v
