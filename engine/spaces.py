@@ -119,7 +119,7 @@ class SpaceParams:
     min_scanned_density: float = 0.2
     #: Spaces of at least this many m² are parsed again on their own points in their own frame
     #: (:mod:`engine.refine`; 0: never) ...
-    refine_min_area: float = 40.0
+    refine_min_area: float = 80.0
     #: ... whose yaw, when within this many degrees of the building's, is the building's.
     refine_snap_deg: float = 2.0
     #: A refined space whose walls follow a second orientation at least ``refine_separation_deg`` from the
