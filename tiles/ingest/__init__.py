@@ -37,7 +37,7 @@ from typing import Any
 import dask
 import numpy as np
 
-from tiles import paths
+from tiles import paths, scratch
 from tiles.builder import StoreBuilder
 from tiles.errors import UserError
 from tiles.ingest._common import Quantization, Reader, complete_columns, is_dir, offset_near, union_dimensions
@@ -175,8 +175,10 @@ def _stage(item, builder: StoreBuilder, grid: Quantization):
         if res.records is not None:  # sort the records whole, then unpack them (see PartResult)
             order = builder.tile_order(res.columns["x"], res.columns["y"])
             rec = np.ascontiguousarray(res.records)
-            rec = np.take(rec.view(f"V{rec.dtype.itemsize}"), order.order).view(rec.dtype)
-            res = res.unpack(rec)
+            void = f"V{rec.dtype.itemsize}"
+            srt = scratch.buffer("sorted records", rec.nbytes).view(void)
+            np.take(rec.view(void), order.order, out=srt, mode="clip")  # "clip": unbuffered; order is in range
+            res = res.unpack(srt.view(rec.dtype))  # (unpack copies: nothing keeps the scratch buffer)
         n = len(res.columns["x"])
         cols = complete_columns(res.columns, builder.dimensions, n)
         out.append((builder.write_part(first_part + k, cols, order=order), res.stats))

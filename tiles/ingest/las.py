@@ -34,6 +34,7 @@ import laspy
 import numpy as np
 from laspy.point import dims as las_dims
 
+from tiles import scratch
 from tiles.errors import UserError
 from tiles.ingest._common import (PartResult, Quantization, Reader, check_file, file_size, gt_dimension,
                                   is_gt_name, open_binary, safe_name)
@@ -398,7 +399,7 @@ class LasReader(Reader):
             else:
                 start, count = spec
                 f.seek(self.offset_to_points + start * self.record_length)
-                buf = np.empty(count * self.record_length, dtype=np.uint8)
+                buf = scratch.buffer("records", count * self.record_length)
                 if f.readinto(memoryview(buf)) != count * self.record_length:
                     raise UserError(self.path, f"truncated: points {start:,}-{start + count:,} are missing")
                 arr = buf.view(self.dtype)
@@ -409,12 +410,12 @@ class LasReader(Reader):
         import lazrs
 
         f.seek(byte_start)
-        raw = np.empty(nbytes, dtype=np.uint8)  # numpy buffers: no zero-filling, fewer page faults than bytes
+        raw = scratch.buffer("laz", nbytes)  # reused buffers: no zero-filling, no fresh pages (tiles.scratch)
         got = f.readinto(memoryview(raw))
         if got != nbytes:
             raise UserError(self.path, f"truncated: the LAZ chunks of points {start:,}-{start + count:,} "
                                        "are cut short")
-        out = np.empty(count * self.record_length, dtype=np.uint8)
+        out = scratch.buffer("records", count * self.record_length)
         try:
             lazrs.decompress_points_with_chunk_table(raw, self.laszip_vlr, out, table)
         except Exception as exc:  # noqa: BLE001 - lazrs raises its own errors
