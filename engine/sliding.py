@@ -10,14 +10,21 @@ floor, ceiling).  The linear SVM score ``w . Phi + b`` of all positions of one
 window shape is computed at once (:func:`score_windows`):
 
 * a window's sub-boxes are products of per-axis voxel intervals; the distinct
-  intervals of all positions along each axis are collected, the moment sums of
-  all their products come from the integral volume in eight vectorised look-ups
-  (:func:`engine.moments.box_sums_grid`), and their local features are computed
-  once (shared by the overlapping windows);
-* each of the ``K^3`` sub-box slots then adds ``w_slot . features`` gathered
-  for all positions; the ratio feature is linear in the sub-box count, divided
-  by the window's count at the end; the global features are computed per
-  position.
+  intervals of all positions along each axis are collected, the point counts of
+  all their products come from the integral volume of counts in separable
+  look-ups (:func:`engine.moments.box_sums_grid`), and the occupied ones (about
+  one in ten in a room) get their moment sums by the same eight-corner look-ups
+  as :func:`engine.features.window_features` (so that the scores equal the
+  training features' to the last digits: sums taken in another order differ by
+  rounding that a nearly degenerate covariance magnifies to 0.03 in a score) and
+  their local features, once (shared by the overlapping windows);
+* the ``K^3`` sub-box slots then add ``w_slot . features`` for all positions:
+  per pair of slots along two axes one gather of feature vectors and one
+  product with the weights of the ``K`` slots along the third; the ratio feature
+  is linear in the sub-box count, divided by the window's count at the end; the
+  global features are computed per position that holds enough points;
+* :func:`score_windows_many` does this for several linear models of one window
+  shape at once (the features are computed once).
 
 :func:`non_maximum_suppression` keeps, per class, the best windows that overlap
 a better one by at most ``nms_iou`` (3D IoU in the canonical frame).
@@ -180,15 +187,20 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
         w2[..., j] = wl[j].reshape(k, k, k, -1)
         w2[..., 1, j] = 0.0
         w2[..., 1, m + j] = wl[j, :, 1].reshape(k, k, k)
+    iv_n = np.ascontiguousarray(vol.iv[..., :1])  # the counts alone find the occupied sub-boxes
     for s in range(0, len(px), per_x):
         sl = slice(s, s + per_x)
         need, sub_ix = np.unique(ix[sl], return_inverse=True)
         sub_ix = sub_ix.reshape(ix[sl].shape)
-        sums = mom.box_sums_grid(vol.iv, ux[need], uy, uz)
-        occ = sums[..., 0] >= occupied
-        feats = np.zeros(sums.shape[:-1] + (LOCAL_SIZE,))
-        part = local_features(sums[occ], np.ones(int(occ.sum())), k, layout.min_points)
-        part[:, 1] = sums[occ][:, 0]  # raw count: ratio = count / window count
+        xs = ux[need]
+        occ = np.nonzero(mom.box_sums_grid(iv_n, xs, uy, uz)[..., 0] >= occupied)
+        # all moments only there (in a room about one sub-box in ten holds points)
+        lo = np.stack([xs[occ[0], 0], uy[occ[1], 0], uz[occ[2], 0]], axis=-1)
+        hi = np.stack([xs[occ[0], 1], uy[occ[1], 1], uz[occ[2], 1]], axis=-1)
+        sums = mom.box_sums(vol.iv, lo, hi)
+        feats = np.zeros((len(xs), len(uy), len(uz), LOCAL_SIZE))
+        part = local_features(sums, np.ones(len(sums)), k, layout.min_points)
+        part[:, 1] = sums[:, 0]  # raw count: ratio = count / window count
         feats[occ] = part
         acc[sl] += _slot_sums(feats, (sub_ix, iy, iz), w2, k)
     n_win = np.maximum(counts, 1.0)
