@@ -106,11 +106,22 @@ def integral_volume(moments: np.ndarray) -> np.ndarray:
 
 
 def box_sums(iv: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Moment sums ``(..., C)`` over boxes of voxels ``[lo, hi)`` (integer arrays ``(..., 3)``)."""
-    x0, y0, z0 = lo[..., 0], lo[..., 1], lo[..., 2]
-    x1, y1, z1 = hi[..., 0], hi[..., 1], hi[..., 2]
-    return (iv[x1, y1, z1] - iv[x0, y1, z1] - iv[x1, y0, z1] - iv[x1, y1, z0]
-            + iv[x0, y0, z1] + iv[x0, y1, z0] + iv[x1, y0, z0] - iv[x0, y0, z0])
+    """Moment sums ``(..., C)`` over boxes of voxels ``[lo, hi)`` (integer arrays ``(..., 3)``).
+
+    Eight corner look-ups of the integral volume, as rows of its flattened
+    ``(cells, C)`` view (one ``take`` each, about twice as fast as indexing by
+    three arrays; the same values).
+    """
+    nx, ny, nz, c = iv.shape
+    rows = iv.reshape(-1, c)
+    x0, y0, z0 = lo[..., 0] * (ny * nz), lo[..., 1] * nz, lo[..., 2]
+    x1, y1, z1 = hi[..., 0] * (ny * nz), hi[..., 1] * nz, hi[..., 2]
+
+    def at(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+        return rows.take(x + y + z, axis=0)
+
+    return (at(x1, y1, z1) - at(x0, y1, z1) - at(x1, y0, z1) - at(x1, y1, z0)
+            + at(x0, y0, z1) + at(x0, y1, z0) + at(x1, y0, z0) - at(x0, y0, z0))
 
 
 def box_sums_grid(iv: np.ndarray, xs: np.ndarray, ys: np.ndarray, zs: np.ndarray) -> np.ndarray:
