@@ -76,30 +76,34 @@ def _intervals(pos: np.ndarray, w: int, k: int) -> tuple[np.ndarray, np.ndarray]
     return uniq, inv.reshape(len(pos), k)
 
 
-def _slot_sums(feats: np.ndarray, index: tuple[np.ndarray, np.ndarray, np.ndarray], w2: np.ndarray,
-               k: int) -> np.ndarray:
+def _slot_sums(nu: tuple[int, int, int], where: tuple[np.ndarray, np.ndarray, np.ndarray], values: np.ndarray,
+               index: tuple[np.ndarray, np.ndarray, np.ndarray], w2: np.ndarray, k: int) -> np.ndarray:
     """``sum over slots (a, b, c) of feats[index_x[:, a], index_y[:, b], index_z[:, c]] @ w2[a, b, c]``.
 
-    ``feats`` is ``(ux, uy, uz, F)`` over distinct sub-box intervals, ``index[d]``
-    ``(n_d, k)`` the interval of each position and slot along axis ``d``, ``w2``
-    ``(k, k, k, F, m)``; the result is ``(n_x, n_y, n_z, m)``.  The axis whose
-    positions share the fewest intervals is gathered last, as scalars: per pair of
-    slots along the two other axes one gather of feature vectors and one product
-    with the ``k`` slots' weights along it.
+    ``feats`` is the ``(ux, uy, uz, F)`` table (``nu = (ux, uy, uz)``) over distinct
+    sub-box intervals, zero but at ``where`` (three index arrays) where it holds
+    ``values`` ``(n, F)``; ``index[d]`` ``(n_d, k)`` is the interval of each position
+    and slot along axis ``d``, ``w2`` ``(k, k, k, F, m)``; the result is
+    ``(n_x, n_y, n_z, m)``.  The axis whose positions share the fewest intervals is
+    gathered last, as scalars: the table is laid out with that axis last, and per
+    pair of slots along the two other axes there is one gather of feature vectors
+    and one product with the ``k`` slots' weights along it.
     """
-    nu = np.array(feats.shape[:3])
+    nu_a = np.array(nu)
     npos = np.array([len(i) for i in index])
-    d = int(np.argmin(nu / npos))  # gathered last
+    d = int(np.argmin(nu_a / npos))  # gathered last
     g0, g1 = (a for a in range(3) if a != d)
-    f = np.ascontiguousarray(np.moveaxis(feats, (g0, g1, d), (0, 1, 2)))
+    nf, m = values.shape[-1], w2.shape[-1]
+    f = np.zeros((nu[g0], nu[g1], nu[d], nf))
+    f[where[g0], where[g1], where[d]] = values
     wt = np.moveaxis(w2, (g0, g1, d), (0, 1, 2))  # (k, k, k, F, m) in (g0, g1, d) slot order
-    m = w2.shape[-1]
     acc = np.zeros((npos[g0], npos[g1], npos[d], m))
     for a in range(k):
         for b in range(k):
             fab = f[np.ix_(index[g0][:, a], index[g1][:, b])]  # (n_g0, n_g1, u_d, F)
             # (k * m, n_g0, n_g1, u_d): per slot along d and output, a contiguous field
-            g = np.moveaxis(fab @ wt[a, b].transpose(1, 0, 2).reshape(f.shape[-1], k * m), -1, 0).copy()
+            wab = wt[a, b].transpose(1, 0, 2).reshape(nf, k * m)
+            g = (wab.T @ fab.reshape(-1, nf).T).reshape(k * m, *fab.shape[:3])
             for c in range(k):
                 for j in range(m):
                     acc[..., j] += np.take(g[c * m + j], index[d][:, c], axis=2)
@@ -198,11 +202,9 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
         lo = np.stack([xs[occ[0], 0], uy[occ[1], 0], uz[occ[2], 0]], axis=-1)
         hi = np.stack([xs[occ[0], 1], uy[occ[1], 1], uz[occ[2], 1]], axis=-1)
         sums = mom.box_sums(vol.iv, lo, hi)
-        feats = np.zeros((len(xs), len(uy), len(uz), LOCAL_SIZE))
         part = local_features(sums, np.ones(len(sums)), k, layout.min_points)
         part[:, 1] = sums[:, 0]  # raw count: ratio = count / window count
-        feats[occ] = part
-        acc[sl] += _slot_sums(feats, (sub_ix, iy, iz), w2, k)
+        acc[sl] += _slot_sums((len(xs), len(uy), len(uz)), occ, part, (sub_ix, iy, iz), w2, k)
     n_win = np.maximum(counts, 1.0)
     return [WindowScores(shape, px, py, pz, np.where(valid, acc[..., j] + acc[..., m + j] / n_win * k3, -np.inf),
                          counts) for j in range(m)]

@@ -74,7 +74,8 @@ def test_slot_sums_equal_the_sum_over_slots(last):
         for b in range(k):
             for c in range(k):
                 want += feats[np.ix_(index[0][:, a], index[1][:, b], index[2][:, c])] @ w2[a, b, c]
-    got = _slot_sums(feats, index, w2, k)
+    where = np.nonzero(np.ones(nu, dtype=bool))
+    got = _slot_sums(tuple(nu), where, feats[where], index, w2, k)
     assert got.shape == want.shape
     assert np.allclose(got, want, rtol=0, atol=1e-12)
 
