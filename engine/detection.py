@@ -13,7 +13,9 @@ For every space (one task each, its points gathered from the tiles it touches):
    suppress each other), at most ``max-per-class`` proposals, and only the best
    one of the classes a space has exactly one of (``one-per-space``: its floor
    and its ceiling);
-5. thin-box refinement: along an axis where a detection is at most
+5. thin-box refinement of the surface classes (``refine-classes``: walls,
+   floors, ceilings; a door or a window is a box as deep as its reveal, not a
+   surface): along an axis where a detection is at most
    ``thin-voxels`` voxels thick and its window's learned size is under half a
    voxel (surfaces seen from one side: walls, floors, ceilings), its extent
    becomes the dense run (bins holding at least 2 % of the peak) around the peak
@@ -66,6 +68,7 @@ class DetectionSettings:
     one_per_space: tuple[str, ...] = ("ceiling", "floor")
     local_search: bool = True
     refine: bool = True
+    refine_classes: tuple[str, ...] = ("ceiling", "floor", "wall")
     thin_voxels: int = 2
     refine_bin: float = 0.005
     label_margin: float = 0.02
@@ -81,12 +84,13 @@ class DetectionSettings:
             raise ValueError("max-per-class and pre-nms must be >= 1")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
-        if isinstance(self.one_per_space, str):
-            self.one_per_space = tuple(c.strip() for c in self.one_per_space.split(",") if c.strip())
-        self.one_per_space = tuple(self.one_per_space)
-        bad = [c for c in self.one_per_space if c not in ELEMENT_CLASSES]
-        if bad:
-            raise ValueError(f"one-per-space: unknown element class(es) {', '.join(bad)}")
+        for name in ("one_per_space", "refine_classes"):
+            v = getattr(self, name)
+            v = tuple(c.strip() for c in v.split(",") if c.strip()) if isinstance(v, str) else tuple(v)
+            bad = [c for c in v if c not in ELEMENT_CLASSES]
+            if bad:
+                raise ValueError(f"{name.replace('_', '-')}: unknown element class(es) {', '.join(bad)}")
+            setattr(self, name, v)
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "DetectionSettings":
@@ -291,7 +295,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     lo_m, hi_m = lo * vox, hi * vox
     if settings.refine and index is not None:
         n = np.asarray(grid.shape)
-        for i in range(len(lo)):
+        surface = np.isin(np.concatenate(cl_all), [ELEMENT_CLASSES.index(c) for c in settings.refine_classes])
+        for i in np.nonzero(surface)[0]:
             # surfaces thinner than half a voxel (walls, floors, ceilings as seen from inside)
             atom = atoms[int(at_all_cat[i])]
             need = np.minimum(atom.size_in(grid.extent), atom.metric_size)

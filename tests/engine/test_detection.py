@@ -72,8 +72,11 @@ def test_refine_extent_is_the_noise_band_of_the_surface():
     assert refine_extent(np.zeros(0), 1.2, 1.3, 0.005) == (1.2, 1.3)
 
 
-def test_one_per_space_setting():
+def test_one_per_space_and_refine_classes_settings():
     assert DetectionSettings.from_config().one_per_space == ("ceiling", "floor")
+    assert DetectionSettings.from_config().refine_classes == ("ceiling", "floor", "wall")
+    with pytest.raises(ValueError, match="refine-classes"):
+        DetectionSettings(refine_classes="walls")
     assert DetectionSettings(one_per_space="wall, floor").one_per_space == ("wall", "floor")
     assert DetectionSettings(one_per_space=()).to_json()["one_per_space"] == []
     with pytest.raises(ValueError, match="one-per-space"):
