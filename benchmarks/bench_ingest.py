@@ -12,7 +12,10 @@ format 7: x y z, intensity, returns, classification, gps_time, rgb; ``--quick``:
   thread each, started before the clock): decode every part, stage it by tile,
   write every tile (Zarr, Blosc LZ4) and the metadata;
 * the same for the uncompressed LAS, whose reference (``laspy.read``) is a
-  plain read of the file into memory.
+  plain read of the file into memory;
+* without a cluster, in this process: ``laspy.read`` of the LAZ on one thread
+  and ``ingest`` with no client, whose CPU ratio is the work ingest does per
+  point of decode, nearly independent of other processes' load.
 
 Reported: seconds, CPU seconds of the whole process tree (on a shared machine
 the wall-clock ratio moves with other people's load; the CPU ratio much less),
@@ -94,6 +97,11 @@ def tree_cpu() -> float:
     return total
 
 
+def _tree_size(path: str) -> int:
+    """Bytes of the files under ``path``."""
+    return sum(os.path.getsize(os.path.join(d, f)) for d, _, fs in os.walk(path) for f in fs)
+
+
 def _laspy_read(path: str, parallel: bool) -> int:
     import laspy
 
@@ -146,11 +154,19 @@ def run(quick: bool = False) -> dict[str, Any]:
             ing_laz = measure("ingest LAZ, 2 workers", ours(laz, "laz.zarr"))
             ref_las = measure("laspy LAS (read into memory)", lambda: _laspy_read(las, True))
             ing_las = measure("ingest LAS, 2 workers", ours(las, "las.zarr"))
+        # The work itself, without the cluster: both in this one process, one thread (CPU seconds are
+        # hardly moved by other people's load, unlike the wall-clock ratio above).
+        ser_ref = measure("laspy LAZ, 1 thread, no cluster", lambda: _laspy_read(laz, False))
+        ser_ing = measure("ingest LAZ, in process, no cluster",
+                          lambda: ingest([laz], os.path.join(work, "serial.zarr")).meta.point_count)
         laz_ratio = ing_laz["seconds"] / ref_laz["seconds"]
         las_ratio = ing_las["seconds"] / ref_las["seconds"]
         summary = {"points": n, "laz_mib": common.mib(os.path.getsize(laz)),
                    "ingest_laz_vs_laspy_2_threads": round(laz_ratio, 2), "target": 1.3,
                    "cpu_ingest_laz_vs_laspy": round(ing_laz["cpu_seconds"] / max(ref_laz["cpu_seconds"], 1e-9), 2),
+                   "cpu_no_cluster_ingest_vs_laspy_1_thread":
+                       round(ser_ing["cpu_seconds"] / max(ser_ref["cpu_seconds"], 1e-9), 2),
+                   "store_mib": common.mib(_tree_size(os.path.join(work, "laz.zarr"))),
                    "load_average": round(os.getloadavg()[0], 1),
                    "ingest_las_vs_laspy_read": round(las_ratio, 2), "generate_s": round(gen_s, 1),
                    "cpus": os.cpu_count()}
