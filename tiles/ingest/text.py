@@ -27,7 +27,6 @@ from typing import Any
 
 import dask
 import numpy as np
-import pandas as pd
 
 from tiles.errors import UserError
 from tiles.ingest._common import (DEFAULT_SCALE, PartResult, Quantization, Reader, check_file, file_size,
@@ -135,6 +134,8 @@ def parse_block(buf: bytes, ncols: int, sep: str, *, policy: str = "error") -> t
     if not len(a):
         return np.empty((0, ncols)), stats
     if not _CONTROL[a].any():
+        import pandas as pd  # here, not at the top: importing pandas costs every ingest ~0.4 s otherwise
+
         try:
             vals = _fast(buf, ncols, sep)
         except (ValueError, pd.errors.ParserError):
@@ -148,6 +149,8 @@ def parse_block(buf: bytes, ncols: int, sep: str, *, policy: str = "error") -> t
 
 
 def _fast(buf: bytes, ncols: int, sep: str) -> np.ndarray | None:
+    import pandas as pd
+
     df = pd.read_csv(io.BytesIO(buf), sep=sep, header=None, dtype=np.float64, engine="c",
                      skip_blank_lines=False, na_filter=True)
     if df.shape[1] != ncols:
@@ -189,6 +192,8 @@ def _careful(buf: bytes, a: np.ndarray, ncols: int, stats: BlockStats, policy: s
     text = _join_lines(a, starts, ends, good, fixed)
     if not text:
         return np.empty((0, ncols))
+    import pandas as pd
+
     try:
         vals = pd.read_csv(io.BytesIO(text.replace(b",", b" ")), sep=r"\s+", header=None, dtype=np.float64,
                            engine="c").to_numpy()
