@@ -1,0 +1,95 @@
+"""Detection quality of a trained model (default: the shipped one) on held-out generated buildings.
+
+The README's table of the shipped model comes from this script::
+
+    python -m benchmarks.shipped_model                       # seeds 2000-2001, 250 m2, ground-truth spaces
+    python -m benchmarks.shipped_model --model models/mine --seeds 2000 2001 2002
+
+Buildings are generated like the training ones (``engine.synth.generate`` with
+``engine.training.synthetic_yaw(seed)``) with seeds the model was not trained on
+(``make model`` trains the detectors on 1000-1009 and the CRF on 5000-5001); each
+space is detected on its ground-truth points and scored with VOC AP at 3D IoU
+0.5 four ways: all proposals ranked by the detector's score, the detector's own
+set (score > 0), the set the CRF keeps, and all proposals ranked by the CRF's
+contextual score.  Not a ``bench_*`` suite: ``make bench`` does not run it.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import tempfile
+import time
+
+import numpy as np
+
+
+def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list[str] | None = None) -> dict:
+    """Per-class AP (fractions) of the four rankings, keyed by their names, plus ``seconds``."""
+    from distributed import Client, LocalCluster
+
+    from engine.crf import CRFWeights, apply_crf, rescored
+    from engine.detection import detect
+    from engine.metrics.detection import evaluate_detections
+    from engine.model import load_model
+    from engine.synth import generate
+    from engine.training import synthetic_yaw
+    from tiles.store import open_store
+
+    model = load_model(model_path)
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR, memory_limit="4GiB")
+    client = Client(cluster)
+    t0 = time.perf_counter()
+    try:
+        with tempfile.TemporaryDirectory(prefix="bp-heldout-") as tmp:
+            paths = list(stores or [])
+            for s in ([] if stores else seeds):
+                out = os.path.join(tmp, f"b{s}.zarr")
+                generate(out, seed=s, area_m2=area, yaw=synthetic_yaw(s), client=client)
+                paths.append(out)
+            props, gts = [], []
+            for i, path in enumerate(paths):
+                st = open_store(path)
+                found = detect(st, model=model, client=client, space_array="gt_space")
+                offset = 1_000_000 * i  # distinct spaces per building, far apart: no match across buildings
+                for p in found:
+                    p.space_id += offset
+                    p.center = p.center + np.array([1e5 * i, 0.0, 0.0])
+                props += found
+                for g in st.doc("ground_truth")["elements"]:
+                    gts.append(dict(g, space=int(g["space"]) + offset,
+                                    center=[g["center"][0] + 1e5 * i, *g["center"][1:]]))
+            out = {"detector, ranked": evaluate_detections(props, gts, client=client),
+                   "detector, set (score > 0)": evaluate_detections([p for p in props if p.score > 0], gts,
+                                                                    client=client)}
+            weights = CRFWeights.from_model(model)
+            if weights is not None:
+                kept, _ = apply_crf(props, weights, client=client)
+                out[f"CRF, kept set ({len(kept)} of {len(props)})"] = evaluate_detections(kept, gts, client=client)
+                out["CRF, ranked"] = evaluate_detections(rescored(props), gts, client=client)
+    finally:
+        client.close()
+        cluster.close()
+    return {**out, "seconds": time.perf_counter() - t0}
+
+
+def main(argv: list[str] | None = None) -> int:
+    from engine.metrics.detection import format_ap_table
+
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.shipped_model", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--model", help="model path (default: the shipped model)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[2000, 2001], help="held-out building seeds")
+    parser.add_argument("--area", type=float, default=250.0, help="floor area of each building, m2")
+    parser.add_argument("--stores", nargs="+", help="evaluate these tile stores (with ground truth) instead")
+    args = parser.parse_args(argv)
+    res = evaluate(args.model, args.seeds, args.area, args.stores)
+    seconds = res.pop("seconds")
+    print(format_ap_table([ev.to_json() for ev in res.values()], list(res)))
+    print(f"{seconds:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
