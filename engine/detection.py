@@ -6,7 +6,8 @@ For every space (one task each, its points gathered from the tiles it touches):
 2. one pass over its points: voxel moments and their integral volume
    (:class:`engine.features.SpaceVolume`, voxel size and K from the model);
 3. for every class, every window of the dictionary slid over the unit cube and
-   scored by the class's linear SVM (:func:`engine.sliding.score_windows`);
+   scored by the class's linear SVM (:func:`engine.sliding.score_windows_many`: the atoms
+   of one voxel shape in the space are scored together, their features computed once);
    windows above ``score-threshold``, the ``pre-nms`` best per window shape;
 4. per class, non-maximum suppression (3D IoU ``nms-iou`` of the boxes grown
    to at least ``nms-min-size`` metres, so that parallel slivers of one surface
@@ -47,7 +48,7 @@ from engine.canonical import CanonicalFrame, estimate_frame
 from engine.features import SpaceVolume, window_features
 from engine.model import Model, load_model
 from engine.proposals import Proposal
-from engine.sliding import non_maximum_suppression, score_windows, window_shape
+from engine.sliding import non_maximum_suppression, score_windows_many, window_shape
 from engine.spacedata import SpacePoints, SpaceRef, index_spaces, load_space
 from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
@@ -244,32 +245,52 @@ class Detections:
     atom: np.ndarray
 
 
+def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSettings,
+                      classes: list[int] | None = None) -> dict[int, tuple[np.ndarray, ...]]:
+    """Per dictionary atom, its windows above ``score-threshold`` (at most ``pre-nms``, best first).
+
+    Returns ``{atom index: (lo, hi, score, atom index per window)}`` for the atoms of the
+    trained (and requested) classes that have any.  Atoms whose windows have the same
+    voxel shape in this space are scored together (:func:`engine.sliding.score_windows_many`
+    computes their features once): the scores are those of one :func:`engine.sliding.score_windows` call each.
+    """
+    grid = vol.grid
+    wanted = set(range(len(ELEMENT_CLASSES)) if classes is None else classes)
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for ai, atom in enumerate(model.dictionary.atoms_):
+        c = atom.class_code
+        if c in wanted and model.trained[c]:
+            shape = window_shape(atom.size_in(grid.extent), grid)
+            groups.setdefault(tuple(int(v) for v in shape), []).append(ai)
+    out: dict[int, tuple[np.ndarray, ...]] = {}
+    for shape, members in groups.items():
+        codes = [model.dictionary.atoms_[ai].class_code for ai in members]
+        scored = score_windows_many(vol, np.array(shape), np.stack([model.weights[c] for c in codes]),
+                                    np.array([model.bias[c] for c in codes]), model.layout, settings.stride,
+                                    settings.min_window_points, settings.max_stride)
+        for ai, ws in zip(members, scored):
+            flat = ws.scores.ravel()
+            ok = np.nonzero(flat > settings.score_threshold)[0]
+            if len(ok) > settings.pre_nms:
+                ok = ok[np.argpartition(-flat[ok], settings.pre_nms - 1)[:settings.pre_nms]]
+            if len(ok):
+                lo, hi = ws.boxes(ok)
+                out[ai] = (lo, hi, flat[ok], np.full(len(ok), ai))
+    return out
+
+
 def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings,
                      index: PointIndex | None = None, classes: list[int] | None = None) -> Detections:
     """Sliding windows, NMS and refinement in one prepared space."""
     grid = vol.grid
     lo_all, hi_all, sc_all, cl_all, at_all = [], [], [], [], []
     atoms = model.dictionary.atoms_
+    candidates = window_candidates(vol, model, settings, classes)
     for c in (range(len(ELEMENT_CLASSES)) if classes is None else classes):
-        if not model.trained[c]:
+        found = [candidates[ai] for ai in sorted(candidates) if atoms[ai].class_code == c]
+        if not found:
             continue
-        los, his, scs, ats = [], [], [], []
-        for ai, atom in enumerate(atoms):
-            if atom.class_code != c:
-                continue
-            shape = window_shape(atom.size_in(grid.extent), grid)
-            ws = score_windows(vol, shape, model.weights[c], model.bias[c], model.layout, settings.stride,
-                               settings.min_window_points, settings.max_stride)
-            flat = ws.scores.ravel()
-            ok = np.nonzero(flat > settings.score_threshold)[0]
-            if len(ok) > settings.pre_nms:
-                ok = ok[np.argpartition(-flat[ok], settings.pre_nms - 1)[:settings.pre_nms]]
-            if not len(ok):
-                continue
-            lo, hi = ws.boxes(ok)
-            los.append(lo), his.append(hi), scs.append(flat[ok]), ats.append(np.full(len(ok), ai))
-        if not los:
-            continue
+        los, his, scs, ats = zip(*found)
         lo, hi, sc, at = np.concatenate(los), np.concatenate(his), np.concatenate(scs), np.concatenate(ats)
         # NMS on boxes grown to nms-min-size: parallel slivers of one surface suppress each other
         pad = np.clip(np.ceil(settings.nms_min_size / grid.voxel) - (hi - lo), 0, None) / 2.0
