@@ -280,12 +280,14 @@ def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSetting
 
 
 def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings,
-                     index: PointIndex | None = None, classes: list[int] | None = None) -> Detections:
-    """Sliding windows, NMS and refinement in one prepared space."""
+                     index: PointIndex | None = None, classes: list[int] | None = None,
+                     candidates: dict[int, tuple[np.ndarray, ...]] | None = None) -> Detections:
+    """Sliding windows, NMS and refinement in one prepared space (``candidates``: :func:`window_candidates`'s,
+    when already computed)."""
     grid = vol.grid
     lo_all, hi_all, sc_all, cl_all, at_all = [], [], [], [], []
     atoms = model.dictionary.atoms_
-    candidates = window_candidates(vol, model, settings, classes)
+    candidates = window_candidates(vol, model, settings, classes) if candidates is None else candidates
     for c in (range(len(ELEMENT_CLASSES)) if classes is None else classes):
         found = [candidates[ai] for ai in sorted(candidates) if atoms[ai].class_code == c]
         if not found:
