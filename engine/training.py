@@ -315,6 +315,18 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
           jobs: list[TrainJob] | None = None, log=None, names: list[str] | None = None) -> Model:
     """Train a model on ground-truth spaces of ``stores`` (or on the given ``jobs``).
 
+    See :func:`train_with_samples` for the parameters; this returns only the model.
+    """
+    return train_with_samples(stores, client=client, settings=settings, detection=detection,
+                              provenance=provenance, jobs=jobs, log=log, names=names)[0]
+
+
+def train_with_samples(stores: list[Any], *, client=None, settings: TrainSettings | None = None,
+                       detection: DetectionSettings | None = None, provenance: dict[str, Any] | None = None,
+                       jobs: list[TrainJob] | None = None, log=None,
+                       names: list[str] | None = None) -> tuple[Model, dict[int, Samples]]:
+    """Train a model on ground-truth spaces of ``stores`` (or on the given ``jobs``); also its samples.
+
     Parameters
     ----------
     stores
@@ -336,6 +348,12 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
 
     The model's provenance holds only facts of the data and settings (no timestamp, no duration),
     so that training again on the same data writes the same model.
+
+    Returns
+    -------
+    The model and, per class code, the training vectors it was fitted on (full layout: every
+    feature group is computed, the disabled ones are only left out of the fit), for
+    :func:`refit_without`.
     """
     settings = settings or TrainSettings.from_config()
     det_run = detection or DetectionSettings.from_config()
@@ -417,7 +435,45 @@ def train(stores: list[Any], *, client=None, settings: TrainSettings | None = No
                              "buildings": sorted({j.building for j in jobs}),
                              "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)}})
     say(f"trained in {time.perf_counter() - t0:.0f} s")
-    return model
+    return model, samples
+
+
+def refit_without(model: Model, samples: dict[int, Samples], disabled: tuple[str, ...],
+                  settings: TrainSettings | None = None) -> Model:
+    """The model's SVMs fitted again on the same samples without the feature groups ``disabled``.
+
+    A cheap ablation (paper Table 3): the dictionary and the training vectors are the
+    model's own, so the negatives were mined with the full model's detectors, not with
+    the ablated ones (a full ablation would mine again with every pass over the spaces).
+
+    Parameters
+    ----------
+    model, samples
+        A model and its samples, as :func:`train_with_samples` returns them.
+    disabled
+        Feature groups to leave out (:data:`engine.features.ABLATIONS` values), added to the
+        model's own disabled groups.
+    settings
+        The SVM's ``c`` and ``seed`` (default: the model's training settings).
+    """
+    kw = model.svm.get("settings", {})
+    c = settings.c if settings is not None else float(kw.get("c", 0.05))
+    seed = settings.seed if settings is not None else int(kw.get("seed", 0))
+    layout = FeatureLayout(model.layout.k, tuple(dict.fromkeys(model.layout.disabled + tuple(disabled))),
+                           model.layout.min_points, model.layout.colour)
+    weights, bias = np.zeros_like(model.weights), np.zeros_like(model.bias)
+    trained = model.trained.copy()
+    for cl in range(N_CLASSES):
+        s = samples.get(cl)
+        if not trained[cl] or s is None or not s.pos or not s.neg:
+            trained[cl] = False
+            continue
+        weights[cl], bias[cl] = _fit_svm(np.concatenate(s.pos), np.concatenate(s.neg), layout.mask, c, seed)
+    out = dataclasses.replace(model, layout=layout, weights=weights, bias=bias, trained=trained,
+                              crf=None, crf_arrays={})
+    out.svm = dict(model.svm, ablation={"disabled": list(disabled),
+                                        "samples": "the full model's (negatives mined with all features)"})
+    return out
 
 
 def synthetic_yaw(seed: int) -> float:
