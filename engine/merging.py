@@ -193,6 +193,35 @@ def test_edges(store, grid: Grid, floors: np.ndarray, cells: list[Box], edges: l
         e.divider, e.tested = r, True
 
 
+def ridge_faces(edges: list[Edge], ridges: list, params, bin_width: float, occupancy=None) -> list[Edge]:
+    """The edges with every face without a divider cut where a ridge line covers it (:mod:`engine.ridges`).
+
+    A wall seen as one dense surface (two faces merged by registration errors,
+    glass) has no void for :func:`face_divider` to find; the ridge line found
+    in 2-D over the space's upper band stands in for it, on the stretch it
+    covers (:func:`engine.ridges.face_pieces`): the covered pieces get a
+    ``"ridge"`` divider, the rest stays open where the ceiling was scanned on
+    both sides (``occupancy``, :class:`engine.ridges.Occupancy`) and is left out
+    of the face elsewhere.
+    """
+    import dataclasses
+
+    from engine.ridges import face_pieces
+
+    if not ridges:
+        return edges
+    out: list[Edge] = []
+    for e in edges:
+        if e.divider is not None:
+            out.append(e)
+            continue
+        for a, b, r in face_pieces(ridges, e.axis, e.position, e.overlap, params, bin_width, occupancy):
+            div = None if r is None else {"kind": "ridge", "position": r.cut * bin_width, "width": 0.0,
+                                          "score": 0.0}
+            out.append(dataclasses.replace(e, overlap=(a, b), divider=div))
+    return out
+
+
 @dataclass
 class MergeRules:
     """When two groups of cells are one space, and when a group is too weak to be a space.

@@ -250,7 +250,8 @@ def gather_space(store, tiles: list[str], index: BoxIndex, grid: Grid, cells: np
 def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, floors: np.ndarray,
                 band_z: np.ndarray) -> Part:
     """Recursive slicing and merging of a memory store's points in the frame ``yaw``."""
-    from engine.merging import merge, neighbour_edges, test_edges
+    from engine.merging import merge, neighbour_edges, ridge_faces, test_edges
+    from engine.ridges import Occupancy, space_ridges
     from engine.slicing import slice_storeys
 
     out = Part(yaw)
@@ -259,12 +260,17 @@ def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, fl
     sub = Grid.for_store(mem, Frame(yaw, tuple(grid.frame.origin)), grid.bin_width, grid.z_bin)
     fl = np.asarray(floors, dtype=np.int64)[floor:floor + 1]
     bz = np.asarray(band_z, dtype=np.int64)[floor:floor + 1]
-    bu, bv, _ = sub.tile_bins(mem, "memory")
+    bu, bv, bzs = sub.tile_bins(mem, "memory")
     start = [Box(0, int(bu.min()), int(bu.max()) + 1, int(bv.min()), int(bv.max()) + 1)]
+    # walls seen as one dense surface (no void): ridge lines over the space's upper band (engine.ridges)
+    ridges = space_ridges(bu, bv, bzs, int(bz[0]), grid.z_bin, params.ridges, grid.bin_width)
     cells, dividers, _ = slice_storeys(mem, sub, [tuple(fl[0])], start, params.slicing_walls, bz,
-                                       max_levels=params.max_levels)
+                                       max_levels=params.max_levels, ridges=ridges, ridge_params=params.ridges)
     edges = neighbour_edges(cells, params.walls.bins(params.min_face))
     test_edges(mem, sub, fl, cells, edges, params.walls, params.merge_window, bz)
+    if ridges:
+        occ = Occupancy.build(bu, bv, bzs, int(bz[0]), params.ridges.bins(params.ridges.occupancy_pixel, grid.bin_width))
+        edges = ridge_faces(edges, ridges, params.ridges, grid.bin_width, occ)
     comps = merge(cells, edges, grid.bin_width, params.rules)
     for c in cells:
         c.floor = floor

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.dividers import DividerParams, detect_dividers, empty_runs
+from engine.dividers import Divider, DividerParams, detect_dividers, empty_runs
 from engine.histograms import (BoxIndex, Grid, histogram_pass, segment_histograms, share, tile_extents,
                                tiles_touching)
 from tiles.tasks import run_tasks
@@ -109,15 +109,27 @@ class Split:
     empties: list[tuple[int, int]] = field(default_factory=list)
 
 
-def split_histogram(hist: np.ndarray, lo: int, params: DividerParams, upper: np.ndarray | None = None) -> Split:
+def split_histogram(hist: np.ndarray, lo: int, params: DividerParams, upper: np.ndarray | None = None,
+                    ridges: list[int] | tuple[int, ...] = ()) -> Split:
     """Cut a histogram (first bin ``lo``) at its dividers and empty runs into occupied pieces.
 
     ``upper`` is the histogram of the upper band (see :func:`engine.dividers.detect_dividers`).
+    ``ridges`` are global bins of ridge lines that cut the box too (:mod:`engine.ridges`); one
+    within ``min_spacing`` of a peak-gap-peak divider gives way to it.
     """
     h = np.asarray(hist)
     n = len(h)
     runs = empty_runs(h, params.bins(params.empty_run))
     divs = detect_dividers(h, params, start=lo * params.bin_width, upper=upper)
+    sp = params.bins(params.min_spacing)
+    kinds = ["peak-gap-peak"] * len(divs)
+    for r in sorted(set(int(c) for c in ridges)):
+        cut = r - lo
+        if 0 < cut < n and all(abs(cut - d.cut) >= sp for d in divs):
+            divs.append(Divider(position=float(r * params.bin_width), width=0.0, margin=0.0, score=0.0,
+                                contrast=0.0, void_ratio=0.0, cut=cut))
+            kinds.append("ridge")
+    kind_of = {id(d): k for d, k in zip(divs, kinds)}
     cs = np.concatenate(([0], np.cumsum(h)))
     # occupied intervals between the long empty runs
     spans, a = [], 0
@@ -138,12 +150,12 @@ def split_histogram(hist: np.ndarray, lo: int, params: DividerParams, upper: np.
             if c > 0:
                 pieces.append((lo + p0, lo + p1, c))
     inner = [(lo + r0, lo + r1) for r0, r1 in runs if r0 > 0 and r1 < n]
-    return Split(pieces, [{**d.to_json(), "cut": lo + d.cut} for d in kept], inner)
+    return Split(pieces, [{**d.to_json(), "cut": lo + d.cut, "kind": kind_of[id(d)]} for d in kept], inner)
 
 
-def _search(item: tuple[np.ndarray, np.ndarray, int], params: DividerParams) -> Split:
-    hist, upper, lo = item
-    return split_histogram(hist, lo, params, upper)
+def _search(item: tuple, params: DividerParams) -> Split:
+    hist, upper, lo, ridges = item
+    return split_histogram(hist, lo, params, upper, ridges)
 
 
 def floor_levels(z_hist: np.ndarray, z_lo: int, floors: list[tuple[int, int]], z_bin: float,
@@ -212,8 +224,8 @@ def _stretches(hist: np.ndarray, lo: int, params: DividerParams) -> list[tuple[i
 
 
 def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[Box], params: DividerParams,
-                  band_z: np.ndarray, *, client=None, max_levels: int = 8
-                  ) -> tuple[list[Box], list[FoundDivider], list[dict[str, Any]]]:
+                  band_z: np.ndarray, *, client=None, max_levels: int = 8, ridges: list | None = None,
+                  ridge_params=None) -> tuple[list[Box], list[FoundDivider], list[dict[str, Any]]]:
     """Recursive slicing of the storeys' boxes; returns the final cells, the dividers and per-pass stats.
 
     Each box has its next axis.  A box cut along an axis gives children that
@@ -221,8 +233,11 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
     divider is final.  A box not searched yet (a storey) gets the histograms of
     both axes in the same pass, so that when its first axis has no divider the
     second is searched at once (one pass less).  ``band_z`` is the first z bin
-    of each storey's upper band (points above door height).
+    of each storey's upper band (points above door height).  ``ridges``
+    (:class:`engine.ridges.RidgeLine`, with ``ridge_params``) also cut every box
+    they run through far enough (:func:`engine.ridges.box_cuts`).
     """
+    from engine.ridges import box_cuts
     boxes = list(start)
     dividers: list[FoundDivider] = []
     stats: list[dict[str, Any]] = []
@@ -254,9 +269,15 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
                                np.repeat(length.ravel(), 2), client=client, label=f"slicing pass {level}",
                                extra_args=(store, grid, share(client, index), axis_of, both, band_z))
 
-        def item(i: int, which: int) -> tuple[np.ndarray, np.ndarray, int]:
+        def item(i: int, which: int) -> tuple[np.ndarray, np.ndarray, int, list[int]]:
             k = 4 * i + 2 * which
-            return hists[k] + hists[k + 1], hists[k + 1], int(lo[i, which])
+            cuts: list[int] = []
+            if ridges:
+                b = boxes[i]
+                ax = b.next_axis if which == 0 else 1 - b.next_axis
+                a0, a1 = b.range(ax)
+                cuts = [r.cut for r in box_cuts(ridges, ax, a0, a1, b.range(1 - ax), ridge_params, bw)]
+            return hists[k] + hists[k + 1], hists[k + 1], int(lo[i, which]), cuts
 
         firsts = run_tasks(_search, [item(i, 0) for i in active_ids], client=client,
                            label=f"dividers pass {level}", keys=active_ids, extra_args=(params,))
@@ -309,7 +330,8 @@ def _record(dividers: list[FoundDivider], b: Box, axis: int, sp: Split, level: i
     extent = [other[0] * bw, other[1] * bw]
     for d in sp.dividers:
         dividers.append(FoundDivider(AXES[axis], b.floor, d["position"], d["width"], d["score"], extent,
-                                     level=level, contrast=d["contrast"], void_ratio=d["void_ratio"]))
+                                     kind=d.get("kind", "peak-gap-peak"), level=level, contrast=d["contrast"],
+                                     void_ratio=d["void_ratio"]))
     for a0, a1 in sp.empties:
         dividers.append(FoundDivider(AXES[axis], b.floor, 0.5 * (a0 + a1) * bw, (a1 - a0) * bw, 0.0, extent,
                                      kind="empty", level=level))

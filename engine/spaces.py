@@ -35,7 +35,7 @@ rely on::
                           # a refined space's former cells stay with "space": -1 and no points
      "dividers": [{"axis": "u"|"v"|"z", "floor" (-1 for slabs), "position" (aligned metres along axis;
                    for "z" world z), "width", "extent": [a, b] (along the other horizontal axis),
-                   "score", "kind": "peak-gap-peak"|"empty", "level", "contrast", "void_ratio",
+                   "score", "kind": "peak-gap-peak"|"empty"|"ridge", "level", "contrast", "void_ratio",
                    "yaw" (only in a refined space's own frame)}],
      "spaces": [{"id", "floor", "cells": [ids], "footprint": GeoJSON Polygon/MultiPolygon (world x, y),
                  "area_m2", "z_range": [z0, z1] (world), "point_count", "tiles": [names],
@@ -75,6 +75,7 @@ from engine.dividers import DividerParams, vertical_params
 from engine.histograms import BoxIndex, Grid, share, tile_extents, tiles_by_size, tiles_touching, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
 from engine.refine import Refinement, clipped_footprint, face_side_space, refine_space, relabel
+from engine.ridges import RidgeParams
 from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
 from tiles.schema import Dimension
 from tiles.store import TileStore
@@ -130,6 +131,8 @@ class SpaceParams:
     refine_min_second: float = 0.5
     refine_block: float = 0.5
     refine_smooth: float = 1.5
+    #: Ridge dividers (walls seen as one dense surface) in the refinement: :mod:`engine.ridges`.
+    ridges: RidgeParams = field(default_factory=RidgeParams)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "walls", dataclasses.replace(self.walls, bin_width=self.bin_width))
@@ -165,6 +168,8 @@ class SpaceParams:
             kw["slabs"] = DividerParams.from_dict(c["slabs"])
         if c.get("alignment"):
             kw["alignment"] = AlignmentParams.from_dict(c["alignment"])
+        if c.get("ridges"):
+            kw["ridges"] = RidgeParams.from_dict(c["ridges"])
         kw.update(overrides)
         return cls(**kw)
 
@@ -172,6 +177,7 @@ class SpaceParams:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         d["walls"], d["slabs"] = self.walls.to_dict(), self.slabs.to_dict()
         d["alignment"] = self.alignment.to_dict()
+        d["ridges"] = self.ridges.to_dict()
         return d
 
 
