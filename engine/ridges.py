@@ -25,11 +25,13 @@ upper-band points (above door height) of one space:
    wall, which empty runs handle).  A wall reaches down through the low
    slice; a ceiling beam (its bottom well above the doors), light panels and
    the ceiling itself do not, and furniture ends below it;
-3. a ridge may drift ``drift`` metres from chunk to chunk (a wall at a
-   fraction of a degree to the frame); the chunks with a ridge at a position
-   form runs along the wall, gaps up to ``max_gap`` metres bridged;
-4. a run at least ``min_run`` metres long is a *ridge line*.  Positions
-   closer than ``min_spacing`` keep the one with the longer run.
+3. ridges are tracked from chunk to chunk: one continues in the next chunk
+   when it lies within ``drift`` metres of it (a wall at a fraction of a
+   degree to the frame drifts; the two faces of a wall registered apart are
+   two nearby ridges of one line), gaps up to ``max_gap`` metres bridged;
+4. a run at least ``min_run`` metres long is a *ridge line*, at the median
+   position of its ridges.  Of two lines closer than ``min_spacing`` along
+   the same stretch the longer is kept.
 
 A column grid, a pier or a beam across a hallway makes ridges in the chunks
 it occupies only: its runs stay below ``min_run`` and it is no ridge line;
@@ -99,12 +101,24 @@ class RidgeParams:
 
 @dataclass(frozen=True)
 class RidgeLine:
-    """A ridge line: normal to ``axis`` (0: u, 1: v) at bin edge ``cut``; ``runs`` along the other axis (bins)."""
+    """A ridge line: normal to ``axis`` (0: u, 1: v) at bin edge ``cut``; ``runs`` along the other axis (bins).
+
+    ``lo``/``hi``: the extent of its ridges along the normal (a wall at a small
+    angle to the frame drifts); default ``cut``.
+    """
 
     axis: int
     cut: int
     runs: tuple[tuple[int, int], ...]
     strength: float
+    lo: int | None = None
+    hi: int | None = None
+
+    def near(self, position: int, tol: int) -> bool:
+        """Whether a face at bin ``position`` lies within ``tol`` bins of the line's extent."""
+        lo = self.cut if self.lo is None else self.lo
+        hi = self.cut if self.hi is None else self.hi
+        return lo - tol <= position <= hi + tol
 
     @property
     def length(self) -> int:
@@ -187,30 +201,55 @@ def find_ridges(normal: np.ndarray, along: np.ndarray, low: np.ndarray, axis: in
     h = np.bincount(key, minlength=n * k).reshape(n, k)
     hl = np.bincount(key[np.asarray(low, dtype=bool)], minlength=n * k).reshape(n, k)
     mask, ratio = ridge_mask(h, hl, p, bin_width)
+    return _lines(mask, ratio, axis, n0, a0, cb, p, bin_width)
+
+
+def _lines(mask: np.ndarray, ratio: np.ndarray, axis: int, n0: int, a0: int, cb: int, p: RidgeParams,
+           bin_width: float) -> list[RidgeLine]:
+    """Ridge lines from the per-(normal bin, chunk) ridge mask: chunks linked along the wall by tracking.
+
+    A ridge in one chunk continues in the next when it lies within ``drift``
+    of it (a wall at a small angle to the frame shifts a little from chunk to
+    chunk; the two faces of a wall registered apart are two nearby ridges of
+    the same line); gaps of up to ``max_gap`` are bridged.  Each connected
+    set is one candidate, its position the median of its ridges, ``lo``/``hi``
+    their extent; its runs of at least ``min_run`` are the line.
+    """
     d = max(0, int(round(p.drift / bin_width)))
-    if d:
-        wide = ndimage.maximum_filter1d(mask.astype(np.uint8), 2 * d + 1, axis=0).astype(bool)
-    else:
-        wide = mask
     gap = int(round(p.max_gap / p.chunk))
+    wide = ndimage.maximum_filter1d(mask.astype(np.uint8), 2 * d + 1, axis=0) if d else mask.astype(np.uint8)
+    if gap:
+        wide = ndimage.maximum_filter1d(wide, 2 * gap + 1, axis=1)  # reach across the gaps ...
+    comp, n_comp = ndimage.label(wide.astype(bool))
+    if n_comp == 0:
+        return []
     min_chunks = p.min_run / p.chunk
-    cand: list[tuple[float, int, list[tuple[int, int]]]] = []
-    # only positions with a ridge in enough chunks can hold a long run
-    for i in np.flatnonzero(wide.sum(axis=1) >= min_chunks):
-        runs = [r for r in _runs(wide[i], gap) if r[1] - r[0] >= min_chunks]
-        if runs:
-            total = sum(b - a for a, b in runs)
-            cand.append((total + 1e-3 * float(np.max(ratio[i])), int(i), runs))
-    out: list[RidgeLine] = []
-    taken: list[int] = []
-    sp = max(1, int(round(p.min_spacing / bin_width)))
     w = max(1, int(round(p.width / bin_width)))
-    for score, i, runs in sorted(cand, key=lambda c: (-c[0], c[1])):
-        if any(abs(i - j) < sp for j in taken):
+    ii, kk = np.nonzero(mask)  # ... but a line holds only the chunks with a ridge
+    lab = comp[ii, kk]
+    cand = []
+    for c in range(1, n_comp + 1):
+        sel = lab == c
+        if not sel.any():
             continue
-        taken.append(i)
+        ks = np.zeros(mask.shape[1], dtype=bool)
+        ks[kk[sel]] = True
+        runs = [r for r in _runs(ks, gap) if r[1] - r[0] >= min_chunks]
+        if not runs:
+            continue
+        total = sum(b - a for a, b in runs)
+        pos = ii[sel]
+        strength = total + 1e-3 * float(np.mean(ratio[ii[sel], kk[sel]]))
+        cand.append((strength, int(np.median(pos)), int(pos.min()), int(pos.max()), runs))
+    out: list[RidgeLine] = []
+    sp = max(1, int(round(p.min_spacing / bin_width)))
+    for strength, i, lo, hi, runs in sorted(cand, key=lambda c: (-c[0], c[1])):
+        clash = [r for r in out if abs(r.cut - (n0 + i + w // 2)) < sp
+                 and any(r.covered(a0 + a * cb, a0 + b * cb) for a, b in runs)]
+        if clash:
+            continue
         out.append(RidgeLine(axis, n0 + i + w // 2, tuple((a0 + a * cb, a0 + b * cb) for a, b in runs),
-                             float(score)))
+                             float(strength), n0 + lo + w // 2, n0 + hi + w // 2))
     return sorted(out, key=lambda r: (r.axis, r.cut))
 
 
@@ -302,7 +341,7 @@ def face_pieces(ridges: list[RidgeLine], axis: int, position: int, overlap: tupl
     tol = int(round((p.width + p.drift) / bin_width))
     o0, o1 = overlap
     owner: list[tuple[int, int, RidgeLine]] = []
-    for r in sorted((r for r in ridges if r.axis == axis and abs(r.cut - position) <= tol),
+    for r in sorted((r for r in ridges if r.axis == axis and r.near(position, tol)),
                     key=lambda r: -r.strength):
         for a, b in r.runs:
             a, b = max(a, o0), min(b, o1)
