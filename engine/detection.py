@@ -48,6 +48,7 @@ from engine.canonical import CanonicalFrame, estimate_frame
 from engine.features import SpaceVolume, window_features
 from engine.model import Model, load_model
 from engine.proposals import Proposal
+from engine.reveal import refine_reveals
 from engine.sliding import non_maximum_suppression, score_windows_many, window_shape
 from engine.spacedata import SpacePoints, SpaceRef, index_spaces, load_space
 from tiles.classes import ELEMENT_CLASSES
@@ -339,6 +340,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                     lo_m[i, a], hi_m[i, a] = lo[i, a] * vox[a], hi[i, a] * vox[a]
                 pts = index.points_in(lo[i], hi[i])
                 lo_m[i, a], hi_m[i, a] = refine_extent(pts[:, a], lo_m[i, a], hi_m[i, a], settings.refine_bin)
+    if settings.refine and index is not None:
+        refine_reveals(lo, hi, lo_m, hi_m, np.concatenate(cl_all), grid, index)  # doors, boards: depth of points
     return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), np.concatenate(cl_all), at_all_cat)
 
 
