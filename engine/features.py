@@ -210,7 +210,7 @@ def local_features(sums: np.ndarray, n_window: np.ndarray, k: int, min_points: i
     out[..., 2:5] = np.where(occ[..., None], sums[..., 10:13] / safe[..., None], 0.0)
     geo = occ & (n >= 3)
     if geo.any():  # eigen-analysis only where there is a surface to analyse
-        lam, total, vec = mom.smallest_eigen(mom.covariance(sums[geo]))
+        lam, total, vec = mom.smallest_eigen_six(mom.covariance_six(sums[geo]))
         ok = total > 0
         out[geo, 5:8] = np.where(ok[:, None], np.abs(vec), 0.0)
         out[geo, 8] = np.where(ok, lam / np.where(ok, total, 1.0), 0.0)

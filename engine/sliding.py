@@ -18,11 +18,11 @@ window shape is computed at once (:func:`score_windows`):
   training features' to the last digits: sums taken in another order differ by
   rounding that a nearly degenerate covariance magnifies to 0.03 in a score) and
   their local features, once (shared by the overlapping windows);
-* the ``K^3`` sub-box slots then add ``w_slot . features`` for all positions:
-  per pair of slots along two axes one gather of feature vectors and one
-  product with the weights of the ``K`` slots along the third; the ratio feature
-  is linear in the sub-box count, divided by the window's count at the end; the
-  global features are computed per position that holds enough points;
+* each occupied sub-box then adds ``w_slot . features`` to every window that
+  holds it, in every slot it fills there (:func:`_slot_sums`: a sparse scatter,
+  about a tenth of the terms of all windows times all slots); the ratio
+  feature is linear in the sub-box count, divided by the window's count at the
+  end; the global features are computed per position that holds enough points;
 * :func:`score_windows_many` does this for several linear models of one window
   shape at once (the features are computed once).
 
@@ -40,6 +40,8 @@ from engine.features import LOCAL_SIZE, FeatureLayout, SpaceVolume, global_featu
 
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000
+#: Sub-box terms (an occupied sub-box in one slot of one window) added in one go.
+TERM_BATCH = 1 << 20
 
 
 def window_shape(metric_size: np.ndarray, grid: mom.VoxelGrid) -> np.ndarray:
@@ -76,6 +78,13 @@ def _intervals(pos: np.ndarray, w: int, k: int) -> tuple[np.ndarray, np.ndarray]
     return uniq, inv.reshape(len(pos), k)
 
 
+def _exclusive_cumsum(c: np.ndarray) -> np.ndarray:
+    """``[0, c0, c0 + c1, ...]``: the start of each run of lengths ``c``."""
+    out = np.zeros_like(c)
+    np.cumsum(c[:-1], out=out[1:])
+    return out
+
+
 def _slot_sums(nu: tuple[int, int, int], where: tuple[np.ndarray, np.ndarray, np.ndarray], values: np.ndarray,
                index: tuple[np.ndarray, np.ndarray, np.ndarray], w2: np.ndarray, k: int) -> np.ndarray:
     """``sum over slots (a, b, c) of feats[index_x[:, a], index_y[:, b], index_z[:, c]] @ w2[a, b, c]``.
@@ -83,31 +92,58 @@ def _slot_sums(nu: tuple[int, int, int], where: tuple[np.ndarray, np.ndarray, np
     ``feats`` is the ``(ux, uy, uz, F)`` table (``nu = (ux, uy, uz)``) over distinct
     sub-box intervals, zero but at ``where`` (three index arrays) where it holds
     ``values`` ``(n, F)``; ``index[d]`` ``(n_d, k)`` is the interval of each position
-    and slot along axis ``d``, ``w2`` ``(k, k, k, F, m)``; the result is
-    ``(n_x, n_y, n_z, m)``.  The axis whose positions share the fewest intervals is
-    gathered last, as scalars: the table is laid out with that axis last, and per
-    pair of slots along the two other axes there is one gather of feature vectors
-    and one product with the ``k`` slots' weights along it.
+    and slot along axis ``d``, ``w2`` ``(k, k, k, F, m)``.  Returns ``(m, n_x, n_y, n_z)``.
+
+    Sparse: only the non-zero entries are visited.  Each is scattered to the
+    windows that hold it: per axis, the (position, slot) pairs whose interval
+    it is (usually one, up to ``k`` where a stride of a quarter window shares
+    intervals between positions); every combination is one term
+    ``values[i] @ w2[slot]`` added to its window (``np.bincount``).  In a room
+    about one sub-box in ten holds points, so this does about a tenth of the
+    work of a pass over every window and slot.  Terms are taken in batches of
+    :data:`TERM_BATCH`.
     """
-    nu_a = np.array(nu)
-    npos = np.array([len(i) for i in index])
-    d = int(np.argmin(nu_a / npos))  # gathered last
-    g0, g1 = (a for a in range(3) if a != d)
+    npos = tuple(len(i) for i in index)
     nf, m = values.shape[-1], w2.shape[-1]
-    f = np.zeros((nu[g0], nu[g1], nu[d], nf))
-    f[where[g0], where[g1], where[d]] = values
-    wt = np.moveaxis(w2, (g0, g1, d), (0, 1, 2))  # (k, k, k, F, m) in (g0, g1, d) slot order
-    acc = np.zeros((npos[g0], npos[g1], npos[d], m))
-    for a in range(k):
-        for b in range(k):
-            fab = f[np.ix_(index[g0][:, a], index[g1][:, b])]  # (n_g0, n_g1, u_d, F)
-            # (k * m, n_g0, n_g1, u_d): per slot along d and output, a contiguous field
-            wab = wt[a, b].transpose(1, 0, 2).reshape(nf, k * m)
-            g = (wab.T @ fab.reshape(-1, nf).T).reshape(k * m, *fab.shape[:3])
-            for c in range(k):
-                for j in range(m):
-                    acc[..., j] += np.take(g[c * m + j], index[d][:, c], axis=2)
-    return np.moveaxis(acc, (0, 1, 2), (g0, g1, d))
+    nwin = int(np.prod(npos))
+    out = np.zeros((m, nwin))
+    # per axis, the (position, slot) pairs grouped by interval: pair e is position pos[e], slot slot[e];
+    # the pairs of the entry's interval are first[i] ... first[i] + count[i] - 1
+    first, count, pos, slot = [], [], [], []
+    for d in range(3):
+        flat = np.asarray(index[d], dtype=np.int64).ravel()
+        order = np.argsort(flat, kind="stable")
+        cnt = np.bincount(flat, minlength=nu[d])
+        first.append(_exclusive_cumsum(cnt)[where[d]])
+        count.append(cnt[where[d]])
+        pos.append(order // k)
+        slot.append(order % k)
+    terms = count[0] * count[1] * count[2]
+    live = np.nonzero(terms)[0]
+    ends = np.cumsum(terms[live])
+    wflat = w2.reshape(k ** 3, nf, m)
+    s = 0
+    while s < len(live):
+        e = max(int(np.searchsorted(ends, (ends[s - 1] if s else 0) + TERM_BATCH, side="right")), s + 1)
+        j = live[s:e]
+        nj = terms[j]
+        rep = np.repeat(np.arange(len(j)), nj)
+        t = np.arange(int(ends[e - 1] - (ends[s - 1] if s else 0))) - np.repeat(_exclusive_cumsum(nj), nj)
+        # term t of an entry: its z pair is t % count_z, its y pair (t // count_z) % count_y, ...
+        cz = count[2][j][rep]
+        ez = t % cz
+        t //= cz
+        cy = count[1][j][rep]
+        ey = first[1][j][rep] + t % cy
+        ex = first[0][j][rep] + t // cy
+        ez += first[2][j][rep]
+        win = (pos[0][ex] * npos[1] + pos[1][ey]) * npos[2] + pos[2][ez]
+        sl = (slot[0][ex] * k + slot[1][ey]) * k + slot[2][ez]
+        val = np.einsum("nf,nfo->on", values[j][rep], wflat[sl])
+        for o in range(m):
+            out[o] += np.bincount(win, weights=val[o], minlength=nwin)
+        s = e
+    return out.reshape(m, *npos)
 
 
 @dataclass
@@ -168,20 +204,18 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
     win = lambda p, s: np.stack([p, p + s], axis=1)  # noqa: E731
     counts = mom.box_sums_grid(vol.iv[..., :1], win(px, shape[0]), win(py, shape[1]), win(pz, shape[2]))[..., 0]
     valid = counts >= min_points
-    acc = np.zeros(counts.shape + (2 * m,))  # per model: the linear part, then the ratio's weighted raw counts
+    acc = np.zeros((2 * m,) + counts.shape)  # per model: the linear part, then the ratio's weighted raw counts
     if valid.any():
         vi = np.nonzero(valid)
         lo = np.stack([px[vi[0]], py[vi[1]], pz[vi[2]]], axis=-1)
         size = np.broadcast_to(shape, lo.shape)
         g = global_features(lo / n, size / n, size * grid.voxel)
         for j in range(m):
-            acc[..., j][valid] = g @ wg[j] + bias[j]
-    # local part, in batches of x positions so that the sub-box table stays bounded.  Only the
-    # occupied sub-boxes get local features (they are all zero elsewhere; in a room most sub-boxes
-    # are air).  A slot's term is linear in its sub-box's features: for each pair of slots along
-    # two axes the features are gathered for all windows but kept whole along the third axis
-    # (the one with the fewest distinct intervals per position), dotted at once with the K slots'
-    # weights along that axis, and the K scalars are then gathered along it.
+            acc[j][valid] = g @ wg[j] + bias[j]
+    # local part, in batches of x positions so that the sub-box count table stays bounded.  Only
+    # the occupied sub-boxes get local features (they are all zero elsewhere; in a room most
+    # sub-boxes are air), and only they are scattered to the windows and slots that hold them
+    # (_slot_sums): a slot's term is linear in its sub-box's features.
     per_x = max(1, SUBBOX_BATCH // max(len(uy) * len(uz), 1))
     occupied = max(int(layout.min_points), 1)
     # weights (K, K, K, 9, 2m): each model's linear part (ratio excluded: it is divided by the
@@ -204,9 +238,9 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
         sums = mom.box_sums(vol.iv, lo, hi)
         part = local_features(sums, np.ones(len(sums)), k, layout.min_points)
         part[:, 1] = sums[:, 0]  # raw count: ratio = count / window count
-        acc[sl] += _slot_sums((len(xs), len(uy), len(uz)), occ, part, (sub_ix, iy, iz), w2, k)
+        acc[:, sl] += _slot_sums((len(xs), len(uy), len(uz)), occ, part, (sub_ix, iy, iz), w2, k)
     n_win = np.maximum(counts, 1.0)
-    return [WindowScores(shape, px, py, pz, np.where(valid, acc[..., j] + acc[..., m + j] / n_win * k3, -np.inf),
+    return [WindowScores(shape, px, py, pz, np.where(valid, acc[j] + acc[m + j] / n_win * k3, -np.inf),
                          counts) for j in range(m)]
 
 

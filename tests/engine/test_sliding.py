@@ -59,14 +59,16 @@ def test_masked_groups_are_ignored():
     assert np.array_equal(a.scores, b.scores)
 
 
-@pytest.mark.parametrize("last", [0, 1, 2])
-def test_slot_sums_equal_the_sum_over_slots(last):
-    rng = np.random.default_rng(last)
+@pytest.mark.parametrize("seed, fill, batch", [(0, 1.0, 1 << 20), (1, 0.3, 1 << 20), (2, 0.1, 7), (3, 0.0, 5)])
+def test_slot_sums_equal_the_sum_over_slots(monkeypatch, seed, fill, batch):
+    # random intervals: one interval in several slots of one position and of several positions,
+    # intervals no position uses, a sparse table; small term batches split the entries
+    monkeypatch.setattr(sliding, "TERM_BATCH", batch)
+    rng = np.random.default_rng(seed)
     k, m, nf = 3, 2, 5
-    nu = [12, 12, 12]
+    nu = [12, 9, 4]
     npos = [5, 6, 7]
-    nu[last] = 4  # the axis gathered last: fewest distinct intervals per position
-    feats = rng.normal(size=(*nu, nf))
+    feats = rng.normal(size=(*nu, nf)) * (rng.random(nu) < fill)[..., None]
     index = tuple(rng.integers(0, nu[a], (npos[a], k)) for a in range(3))
     w2 = rng.normal(size=(k, k, k, nf, m))
     want = np.zeros((*npos, m))
@@ -74,10 +76,11 @@ def test_slot_sums_equal_the_sum_over_slots(last):
         for b in range(k):
             for c in range(k):
                 want += feats[np.ix_(index[0][:, a], index[1][:, b], index[2][:, c])] @ w2[a, b, c]
-    where = np.nonzero(np.ones(nu, dtype=bool))
+    where = np.nonzero(np.any(feats != 0, axis=-1))
     got = _slot_sums(tuple(nu), where, feats[where], index, w2, k)
-    assert got.shape == want.shape
-    assert np.allclose(got, want, rtol=0, atol=1e-12)
+    assert got.shape == (m, *npos)
+    assert np.abs(want).max() > 1 or fill == 0
+    assert np.allclose(np.moveaxis(got, 0, -1), want, rtol=0, atol=1e-12)
 
 
 def test_many_models_share_the_features_and_score_each_as_alone(monkeypatch):
