@@ -1,15 +1,25 @@
 """Export a tile store to LAS 1.4 / LAZ: every input dimension, the results and ground truth, input order.
 
-The file is written part by part (the ingest's parts, in order), in two
-steps so that every tile array is read once however many parts there are:
+The file is written *unit* by unit: a unit is a range of ``point_index``
+(``buildingparser.export.part-points`` points, rounded up to whole LAZ chunks of
+50,000 points).  Two steps, so that every tile array is read once however many
+units there are:
 
-1. one task per tile reads the whole tile, packs it as LAS point records and
-   stages them with their ``point_index`` in a scratch folder beside the store
-   (a tile holds its points in part order, so each part's records are one
-   contiguous byte range of the staged file);
-2. one task per part reads its byte range from each tile's staged file and
-   sorts the records back into input order; the driver keeps a bounded window
-   of such tasks in flight and appends their records to the file in order.
+1. one task per tile (largest first) reads the whole tile, packs it as LAS
+   point records and stages them with their ``point_index``, in input order, in
+   a scratch folder beside the store (so each unit's records are one contiguous
+   byte range of every tile's staged file);
+2. one task per unit reads its byte range from each tile's staged file, sorts
+   the records back into input order, computes the unit's header statistics
+   (bounds, GPS time range, returns, extra-bytes ranges) and, for LAZ,
+   compresses the unit's chunks.  The driver keeps a bounded window of such
+   tasks in flight and only appends their bytes to the file in order, then
+   writes the LAZ chunk table and the header.  A unit holds whole chunks (but
+   the last), so the points, chunks and chunk table are the same, byte for
+   byte, as laspy compressing the whole cloud in one go: the compression, the
+   costly part, runs on the workers instead of the driver.  (The header's
+   extra-bytes ranges are the true min/max over all points; laspy's own
+   writer takes a one-element field's from the first point it is given.)
 
 The file is written under a temporary name and renamed when complete (for
 URLs: written locally, uploaded under a temporary key, then moved); the
@@ -37,7 +47,9 @@ from __future__ import annotations
 
 import collections
 import datetime as _dt
+import io
 import os
+import struct
 import tempfile
 import time
 import uuid
@@ -48,6 +60,8 @@ import dask
 import laspy
 import numpy as np
 
+from laspy._pointwriter import IPointWriter
+from laspy.vlrs.known import LasZipVlr
 from laspy.vlrs.vlrlist import VLRList
 
 from tiles import paths
@@ -58,6 +72,8 @@ from tiles.store import TileStore
 EXTENSIONS = (".las", ".laz")
 #: LAS extra-bytes names and descriptions are at most 32 bytes.
 _NAME_LEN = 32
+#: Points per LAZ chunk (laspy's and lazrs's default); an export unit holds whole chunks.
+LAZ_CHUNK = 50_000
 
 
 @dataclass
@@ -188,25 +204,138 @@ def pack_part(cols: dict[str, np.ndarray], layout: Layout) -> np.ndarray:
     return arr
 
 
-def _pack_tile(tile, store: TileStore, layout: Layout, scratch: str) -> np.ndarray:
+def unit_points(requested: int | None = None) -> int:
+    """Points per export unit: ``requested`` (default ``buildingparser.export.part-points``) rounded up to
+    whole LAZ chunks."""
+    n = int(requested or dask.config.get("buildingparser.export.part-points", 2_000_000))
+    if n < 1:
+        raise UserError(None, f"export part size must be a positive number of points, not {n}")
+    return -(-n // LAZ_CHUNK) * LAZ_CHUNK
+
+
+def _pack_tile(tile, store: TileStore, layout: Layout, scratch: str, unit: int) -> np.ndarray:
     """Step 1, one task per tile: pack the whole tile as LAS records once and stage them with its point indices.
 
-    A tile keeps its points in part order, so the records of part ``k`` are the
-    contiguous rows ``part_offsets[k]:part_offsets[k+1]`` of the staged file.
-    Returns the tile's ``part_offsets``.
+    The records are staged in ``point_index`` order (an ingested tile already is),
+    so the records of unit ``k`` are the contiguous rows ``starts[k]:starts[k+1]``
+    of the staged file.  Returns ``starts`` (one entry per unit, and the end).
     """
     cols = store.read(tile, layout.store_names)
-    index = cols.pop("point_index")
+    index = cols.pop("point_index").astype(np.int64, copy=False)
     records = pack_part(cols, layout)
+    if len(index) > 1 and not np.all(index[1:] > index[:-1]):
+        order = np.argsort(index, kind="stable")
+        index, records = index[order], records[order]
     _write_bytes(paths.join(scratch, f"{tile.name}.rec"), records, store.storage_options)
-    _write_bytes(paths.join(scratch, f"{tile.name}.idx"), index.astype(np.int64, copy=False), store.storage_options)
-    return store.part_offsets(tile)
+    _write_bytes(paths.join(scratch, f"{tile.name}.idx"), index, store.storage_options)
+    units = -(-store.meta.point_count // unit)
+    return np.searchsorted(index, np.arange(units + 1, dtype=np.int64) * unit)
 
 
-def _gather_part(job, layout: Layout, scratch: str, storage_options) -> np.ndarray:
-    """Step 2, one task per part: its records from each tile's staged file, put back in input order."""
-    k, runs = job
-    dtype = layout.point_format_obj().dtype()
+@dataclass
+class UnitStats:
+    """What the LAS header needs from a unit's records (merged on the driver by :func:`_grow_header`)."""
+
+    count: int
+    mins: list[int]  # raw X, Y, Z
+    maxs: list[int]
+    gps: tuple[float, float] | None  # min, max (None: the format has no GPS time)
+    returns: np.ndarray  # points per return number 0..15
+    #: per tracked extra-bytes field, (min, max) of each element over its valid values (None: none valid)
+    extra: list[tuple[np.ndarray, np.ndarray] | None] = field(default_factory=list)
+
+
+def _eb_tracked(header: laspy.LasHeader) -> list[tuple[str, list[Any] | None]]:
+    """The extra-bytes fields whose min/max the header keeps: (field name, no-data values or None)."""
+    vlrs = header.vlrs.get("ExtraBytesVlr")
+    if not vlrs:
+        return []
+    out = []
+    for eb in vlrs[0].extra_bytes_structs:
+        if eb.data_type != 0 and (eb.min_is_relevant() or eb.max_is_relevant()):
+            nd = eb.no_data
+            out.append((eb.format_name(), None if nd is None else np.asarray(nd).tolist()))
+    return out
+
+
+def unit_stats(arr: np.ndarray, pf: laspy.PointFormat, tracked: list[tuple[str, list[Any] | None]]) -> UnitStats:
+    """The header statistics of packed records (``arr``, point format ``pf``).
+
+    Bounds, GPS range and returns as laspy's ``LasHeader.grow`` takes them; the
+    extra-bytes min/max over every valid value (laspy's own ``grow`` takes a
+    one-element field's from the first record written only).
+    """
+    n = len(arr)
+    mins = [int(arr[c].min()) for c in "XYZ"] if n else [0, 0, 0]
+    maxs = [int(arr[c].max()) for c in "XYZ"] if n else [0, 0, 0]
+    names = arr.dtype.names or ()
+    gps = (float(arr["gps_time"].min()), float(arr["gps_time"].max())) if n and "gps_time" in names else None
+    rn = np.asarray(laspy.PackedPointRecord(arr, pf).return_number)
+    returns = np.bincount(rn, minlength=16)[:16].astype(np.int64)
+    extra: list[tuple[np.ndarray, np.ndarray] | None] = []
+    for name, no_data in tracked:
+        v = arr[name]
+        v = v[:, None] if v.ndim == 1 else v
+        lo, hi, ok = [], [], True
+        for i in range(v.shape[1]):
+            col = v[:, i] if no_data is None else v[v[:, i] != no_data[i], i]
+            if not len(col):
+                ok = False
+                break
+            lo.append(col.min())
+            hi.append(col.max())
+        extra.append((np.asarray(lo), np.asarray(hi)) if ok else None)
+    return UnitStats(n, mins, maxs, gps, returns, extra)
+
+
+def _grow_header(header: laspy.LasHeader, s: UnitStats, extra: list) -> None:
+    """Add a unit's :class:`UnitStats` to the header (bounds, GPS range: laspy's own arithmetic) and to
+    ``extra``, the running extra-bytes ranges (:func:`_set_extra_ranges` writes them at the end)."""
+    if not s.count:
+        return
+    for i, a in enumerate("xyz"):
+        scale, offset = header.scales[i], header.offsets[i]
+        setattr(header, f"{a}_max", max(getattr(header, f"{a}_max"), (np.int32(s.maxs[i]) * scale) + offset))
+        setattr(header, f"{a}_min", min(getattr(header, f"{a}_min"), (np.int32(s.mins[i]) * scale) + offset))
+    if s.gps is not None:
+        header.max_gps_time = max(header.max_gps_time, np.float64(s.gps[1]))
+        header.min_gps_time = min(header.min_gps_time, np.float64(s.gps[0]))
+    nbr = header.number_of_points_by_return
+    for r in range(1, min(16, len(nbr) + 1)):
+        if s.returns[r]:
+            nbr[r - 1] += s.returns[r]
+    header.point_count += s.count
+    for j, got in enumerate(s.extra):
+        if got is not None:
+            extra[j] = got if extra[j] is None else (np.minimum(extra[j][0], got[0]), np.maximum(extra[j][1], got[1]))
+
+
+def _set_extra_ranges(header: laspy.LasHeader, tracked: list, extra: list) -> None:
+    """Write the extra-bytes ranges into the header's extra-bytes records (raw values, as LAS stores them)."""
+    if not tracked:
+        return
+    structs = {eb.format_name(): eb for eb in header.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs}
+    for (name, _), got in zip(tracked, extra):
+        if got is None:
+            continue
+        eb = structs[name]
+        if eb.min_is_relevant():
+            eb._raw_min()[:] = got[0]
+        if eb.max_is_relevant():
+            eb._raw_max()[:] = got[1]
+
+
+def _gather_unit(job, layout: Layout, scratch: str, storage_options, compress: bool,
+                 tracked: list[tuple[str, list[Any] | None]]) -> tuple[bytes, list[tuple[int, int]], UnitStats]:
+    """Step 2, one task per unit: its records from each tile's staged file, put back in input order, with
+    their header statistics and, for LAZ, compressed.
+
+    Returns the bytes to append to the file, the LAZ chunk table entries
+    ``(points, bytes)`` of those bytes (empty for LAS) and the statistics.
+    """
+    k, first, count, runs = job
+    pf = layout.point_format_obj()
+    dtype = pf.dtype()
     size = dtype.itemsize
     recs, idx = [], []
     for tile, start, stop in runs:
@@ -214,10 +343,87 @@ def _gather_part(job, layout: Layout, scratch: str, storage_options) -> np.ndarr
         recs.append(np.frombuffer(raw, dtype=dtype))
         raw = _read_range(paths.join(scratch, f"{tile}.idx"), start * 8, (stop - start) * 8, storage_options)
         idx.append(np.frombuffer(raw, dtype=np.int64))
-    if not recs:
-        return np.zeros(0, dtype=dtype)
-    order = np.argsort(np.concatenate(idx), kind="stable")
-    return np.concatenate(recs)[order]
+    if len(recs) == 1:
+        arr, got = recs[0], idx[0]
+    else:
+        got = np.concatenate(idx) if idx else np.zeros(0, np.int64)
+        order = np.argsort(got, kind="stable")
+        arr = np.concatenate(recs)[order] if recs else np.zeros(0, dtype=dtype)
+        got = got[order]
+    if len(got) != count or (count and (got[0] != first or np.any(np.diff(got) != 1))):
+        raise RuntimeError(f"export unit {k}: its staged points are not the indices {first}..{first + count - 1}")
+    stats = unit_stats(arr, pf, tracked)
+    if not compress:
+        return np.ascontiguousarray(arr).tobytes(), [], stats
+    import lazrs
+
+    vlr = lazrs.LazVlr.new_for_compression(pf.id, pf.num_extra_bytes)
+    buf = io.BytesIO()
+    compressor = lazrs.LasZipCompressor(buf, vlr)
+    compressor.compress_many(np.frombuffer(np.ascontiguousarray(arr), np.uint8))
+    compressor.done()
+    blob = buf.getbuffer()
+    table_at = struct.unpack_from("<q", blob, 0)[0]
+    table = lazrs.read_chunk_table(io.BytesIO(blob), vlr)
+    chunk = vlr.chunk_size()
+    chunks = [(min(chunk, count - i * chunk), int(nbytes)) for i, (_, nbytes) in enumerate(table)]
+    if sum(c for c, _ in chunks) != count or 8 + sum(b for _, b in chunks) != table_at:
+        raise RuntimeError(f"export unit {k}: unexpected LAZ chunk layout")
+    return bytes(blob[8:table_at]), chunks, stats
+
+
+class _ChunkTableWriter(IPointWriter):
+    """laspy's point writer for a LAZ file whose chunks arrive already compressed (:func:`_gather_unit`).
+
+    Writes what lazrs's own compressor writes around the chunks: the LasZip VLR,
+    the offset to the chunk table (patched at the end) and the chunk table.
+    """
+
+    def __init__(self, dest, point_format: laspy.PointFormat):
+        import lazrs
+
+        self.dest = dest
+        self.vlr = lazrs.LazVlr.new_for_compression(point_format.id, point_format.num_extra_bytes)
+        self.chunks: list[tuple[int, int]] = []
+        self.table_offset_at = 0
+        self.finished = False
+
+    @property
+    def destination(self):
+        return self.dest
+
+    def write_initial_header_and_vlrs(self, header: laspy.LasHeader, encoding_errors: str) -> None:
+        header.vlrs.append(LasZipVlr(self.vlr.record_data()))
+        super().write_initial_header_and_vlrs(header, encoding_errors)
+        self.table_offset_at = self.dest.tell()
+        self.dest.write(struct.pack("<q", -1))
+
+    def write_points(self, points) -> None:  # pragma: no cover - the export appends compressed chunks
+        raise NotImplementedError("this writer takes compressed chunks (write_chunks)")
+
+    def write_chunks(self, data: bytes, chunks: list[tuple[int, int]]) -> None:
+        self.dest.write(data)
+        self.chunks.extend(chunks)
+
+    def done(self) -> None:
+        if self.finished:
+            return
+        import lazrs
+
+        self.finished = True
+        at = self.dest.tell()
+        lazrs.write_chunk_table(self.dest, self.chunks, self.vlr)
+        end = self.dest.tell()
+        self.dest.seek(self.table_offset_at)
+        self.dest.write(struct.pack("<q", at))
+        self.dest.seek(end)
+
+
+class _LasWriter(laspy.LasWriter):
+    """laspy's writer whose LAZ point writer is :class:`_ChunkTableWriter`."""
+
+    def _create_laz_backend(self, laz_backends) -> IPointWriter:
+        return _ChunkTableWriter(self.dest, self.header.point_format)
 
 
 def _write_bytes(url: str, values: np.ndarray, storage_options) -> None:
@@ -305,7 +511,7 @@ def precheck(out: str, *, overwrite: bool = False, storage_options: dict[str, An
 
 def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = False,
            point_format: int | None = None, storage_options: dict[str, Any] | None = None,
-           window: int | None = None) -> dict[str, Any]:
+           window: int | None = None, part_points: int | None = None) -> dict[str, Any]:
     """Write a store as a LAS 1.4 (``.las``) or LAZ (``.laz``) file; returns a report (points, seconds).
 
     Parameters
@@ -315,7 +521,7 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     out
         Output path or fsspec URL ending in ``.las`` or ``.laz``.
     client
-        A ``distributed.Client``; None packs the parts here, one after another.
+        A ``distributed.Client``; None packs the units here, one after another.
     overwrite
         Replace an existing file.
     point_format
@@ -323,8 +529,11 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     storage_options
         fsspec options for a URL ``out`` (and ``store`` if given as a string).
     window
-        Part tasks in flight at most (default ``buildingparser.export.window``,
+        Unit tasks in flight at most (default ``buildingparser.export.window``,
         else twice the workers): bounds the driver's memory.
+    part_points
+        Points per unit task (default ``buildingparser.export.part-points``),
+        rounded up to whole LAZ chunks (:func:`unit_points`).
     """
     t0 = time.perf_counter()
     if not isinstance(store, TileStore):
@@ -334,6 +543,7 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     meta = store.meta
     layout = plan_layout(store, point_format)
     header, evlrs = build_header(store, layout)
+    unit = unit_points(part_points)
     if window is None:
         window = dask.config.get("buildingparser.export.window", None)
         if window is None:
@@ -352,21 +562,28 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     try:
         from tiles.tasks import run_tasks
 
-        offsets = run_tasks(_pack_tile, meta.tiles, client=client, label="packing tiles",
-                            keys=[t.name for t in meta.tiles], extra_args=(store, layout, scratch))
-        runs: list[list[tuple[str, int, int]]] = [[] for _ in meta.parts]
-        for t, off in zip(meta.tiles, offsets):
-            for k in np.flatnonzero(np.diff(off) > 0):
-                runs[int(k)].append((t.name, int(off[k]), int(off[k + 1])))
-        backend = laspy.LazBackend.LazrsParallel if ext == ".laz" else None
+        tiles = sorted(meta.tiles, key=lambda t: -t.count)  # largest first: no long task left alone at the end
+        starts = run_tasks(_pack_tile, tiles, client=client, label="packing tiles", keys=[t.name for t in tiles],
+                           extra_args=(store, layout, scratch, unit))
+        units = -(-meta.point_count // unit)
+        jobs = [(k, k * unit, min(unit, meta.point_count - k * unit), []) for k in range(units)]
+        for t, st in zip(tiles, starts):
+            for k in np.flatnonzero(np.diff(st) > 0):
+                jobs[int(k)][3].append((t.name, int(st[k]), int(st[k + 1])))
+        compress = ext == ".laz"
         with open(tmp, "wb") as f:
-            writer = laspy.LasWriter(f, header, do_compress=(ext == ".laz"), laz_backend=backend, closefd=False)
-            pf = writer.header.point_format
-            for arr in _ordered_results(runs, layout, scratch, store.storage_options, client, window):
-                if arr.dtype != pf.dtype():
-                    raise RuntimeError("packed records do not match the point format")
-                writer.write_points(laspy.PackedPointRecord(arr, pf))
-                written += len(arr)
+            writer = _LasWriter(f, header, do_compress=compress, closefd=False)
+            tracked = _eb_tracked(writer.header)
+            extra: list = [None] * len(tracked)
+            for data, chunks, stats in _ordered_results(jobs, layout, scratch, store.storage_options, client,
+                                                        window, compress, tracked):
+                if compress:
+                    writer.point_writer.write_chunks(data, chunks)
+                else:
+                    f.write(data)
+                _grow_header(writer.header, stats, extra)
+                written += stats.count
+            _set_extra_ranges(writer.header, tracked, extra)
             if evlrs:
                 writer.write_evlrs(VLRList(evlrs))
             writer.close()
@@ -394,30 +611,31 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
             "point_format": layout.point_format, "extra_dimensions": [e["name"] for e in layout.extra]}
 
 
-def _ordered_results(runs, layout: Layout, scratch: str, storage_options, client, window: int):
-    """Packed parts in order, at most ``window`` part tasks in flight."""
+def _ordered_results(jobs, layout: Layout, scratch: str, storage_options, client, window: int, compress: bool,
+                     tracked):
+    """:func:`_gather_unit` of every unit, in order, at most ``window`` unit tasks in flight."""
     from tiles.tasks import Progress
 
-    progress = Progress("writing points", len(runs))
+    progress = Progress("writing points", len(jobs))
     if client is None:
-        for k, r in enumerate(runs):
-            yield _gather_part((k, r), layout, scratch, storage_options)
+        for job in jobs:
+            yield _gather_unit(job, layout, scratch, storage_options, compress, tracked)
             progress.update()
         return
     retries = int(dask.config.get("buildingparser.retries", 2))
     pending: collections.deque = collections.deque()
     nxt = 0
     try:
-        while nxt < len(runs) or pending:
-            while nxt < len(runs) and len(pending) < window:
-                pending.append(client.submit(_gather_part, (nxt, runs[nxt]), layout, scratch, storage_options,
-                                             pure=False, retries=retries,
-                                             key=f"export-part-{nxt}-{uuid.uuid4().hex[:6]}"))
+        while nxt < len(jobs) or pending:
+            while nxt < len(jobs) and len(pending) < window:
+                pending.append(client.submit(_gather_unit, jobs[nxt], layout, scratch, storage_options, compress,
+                                             tracked, pure=False, retries=retries,
+                                             key=f"export-unit-{nxt}-{uuid.uuid4().hex[:6]}"))
                 nxt += 1
             fut = pending.popleft()
-            arr = fut.result()
-            yield arr
+            result = fut.result()
             fut.release()
+            yield result
             progress.update()
     finally:
         for f in pending:

@@ -174,3 +174,108 @@ def test_classification_result_too_wide_for_a_legacy_format_is_refused(tmp_path)
         export(store, str(tmp_path / "out.las"))
     export(store, str(tmp_path / "out6.las"), point_format=6)
     assert np.all(np.asarray(laspy.read(str(tmp_path / "out6.las")).classification) == 40)
+
+
+def _reference_bytes(store, path, compress):
+    """What laspy itself writes for the whole store at once (one writer, LAZ compressed here), with the
+    extra-bytes ranges over all points (laspy's writer takes a one-element field's from the first point)."""
+    from tiles.export import build_header, pack_part
+
+    layout = plan_layout(store)
+    header, evlrs = build_header(store, layout)
+    cols = gather_points(store, [c for c in layout.store_names if c != "point_index"])
+    with open(path, "wb") as f:
+        backend = laspy.LazBackend.LazrsParallel if compress else None
+        with laspy.LasWriter(f, header, do_compress=compress, laz_backend=backend, closefd=False) as w:
+            records = pack_part(cols, layout)
+            w.write_points(laspy.PackedPointRecord(records, w.header.point_format))
+            for eb in w.header.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs:  # ranges over all points
+                eb._raw_min()[:] = records[eb.format_name()].min()
+                eb._raw_max()[:] = records[eb.format_name()].max()
+            if evlrs:
+                from laspy.vlrs.vlrlist import VLRList
+
+                w.write_evlrs(VLRList(evlrs))
+    return pathlib.Path(path).read_bytes()
+
+
+def _gps_las(path, n, seed=5):
+    rng = np.random.default_rng(seed)
+    las = laspy.LasData(laspy.LasHeader(point_format=7, version="1.4"))
+    las.header.scales = np.array([0.001] * 3)
+    las.x, las.y, las.z = rng.uniform(0, 25, n), rng.uniform(0, 15, n), rng.uniform(0, 3, n)
+    las.gps_time = rng.uniform(10, 20, n)
+    las.return_number = rng.integers(1, 16, n)
+    las.number_of_returns = np.full(n, 15)
+    las.intensity = rng.integers(0, 65535, n)
+    las.write(str(path))
+    return las
+
+
+@pytest.mark.parametrize("ext", [".laz", ".las"])
+def test_units_on_the_cluster_write_the_bytes_laspy_writes_for_the_whole_cloud(tmp_path, client, ext):
+    # 130,000 points in units of 50,000 (3 unit tasks, the last one short), tiles of 5 m
+    _gps_las(tmp_path / "in.las", 130_000)
+    store = ingest([str(tmp_path / "in.las")], str(tmp_path / "s.zarr"), part_points=20_000, client=client,
+                   tile_size=5.0)
+    _add_results(store)
+    got = tmp_path / ("out" + ext)
+    export(store, str(got), client=client, part_points=50_000, window=2)
+    want = _reference_bytes(store, tmp_path / ("ref" + ext), ext == ".laz")
+    assert got.read_bytes() == want  # header bounds, returns, ranges, points, chunk table: all the same
+    out = laspy.read(str(got))
+    assert out.header.point_count == 130_000 and np.all(out.header.number_of_points_by_return > 0)
+    ranges = {eb.format_name(): (eb.min[0], eb.max[0])
+              for eb in out.header.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs}
+    assert ranges["space_id"] == (0, 129) and ranges["element_id"] == (-1, 129_999)
+
+
+def test_units_need_not_follow_the_ingest_parts_nor_tiles_be_in_point_order(tmp_path, client):
+    las = _las_with_classes(tmp_path / "in.las", n=120_000, seed=9)
+    store = ingest([str(tmp_path / "in.las")], str(tmp_path / "s.zarr"), part_points=7_000, tile_size=5.0)
+    t = max(store.tiles, key=lambda t: t.count)
+    cols = store.read(t, [d.name for d in store.meta.dimensions])
+    flip = np.arange(t.count)[::-1]  # a tile whose points are stored against point order
+    for name, v in cols.items():
+        store.write_array(t, name, v[flip])
+    export(store, str(tmp_path / "out.laz"), client=client, part_points=1)  # rounded up to one chunk
+    out = laspy.read(str(tmp_path / "out.laz"))
+    np.testing.assert_array_equal(out.points.array, las.points.array)
+
+
+def test_header_statistics_of_units_add_up_to_those_of_the_whole(tmp_path):
+    from tiles.export import UnitStats, _eb_tracked, _grow_header, _set_extra_ranges, unit_stats
+
+    pf = laspy.PointFormat(6)
+    pf.add_extra_dimension(laspy.ExtraBytesParams("temp", "int16", no_data=[-1]))
+    pf.add_extra_dimension(laspy.ExtraBytesParams("pair", "2float64"))
+    header = laspy.LasHeader(version="1.4", point_format=pf)
+    rng = np.random.default_rng(2)
+    rec = laspy.PackedPointRecord.zeros(1000, pf)
+    rec.X, rec.Y, rec.Z = rng.integers(-5000, 5000, (3, 1000))
+    rec.gps_time = rng.uniform(0, 1, 1000)
+    rec.return_number = rng.integers(0, 16, 1000)
+    temp = rng.integers(0, 300, 1000)
+    temp[::3] = -1  # no data: not in the range
+    temp[0] = -1
+    rec["temp"] = temp
+    pair = rng.normal(0, 1, (1000, 2))
+    rec["pair"] = pair
+    want = header.copy()
+    want.partial_reset()
+    want.grow(rec)
+    got = header.copy()
+    got.partial_reset()
+    tracked = _eb_tracked(got)
+    assert tracked == [("temp", [-1]), ("pair", None)]
+    extra: list = [None] * len(tracked)
+    for part in (slice(0, 1), slice(1, 300), slice(300, 1000)):  # the first unit has no valid temp
+        _grow_header(got, unit_stats(rec.array[part], pf, tracked), extra)
+    _set_extra_ranges(got, tracked, extra)
+    for attr in ("mins", "maxs", "min_gps_time", "max_gps_time", "number_of_points_by_return", "point_count"):
+        np.testing.assert_array_equal(getattr(got, attr), getattr(want, attr), err_msg=attr)
+    t, p = got.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs
+    assert (t.min[0], t.max[0]) == (temp[temp >= 0].min(), temp.max())
+    np.testing.assert_array_equal(p.min, pair.min(axis=0))
+    np.testing.assert_array_equal(p.max, pair.max(axis=0))
+    assert isinstance(unit_stats(rec.array[:0], pf, tracked), UnitStats)
