@@ -247,7 +247,7 @@ def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margi
     boxes = _boxes(list(elements))
     bounds = _world_bounds(boxes, margin)
     items, subsets = [], []
-    for t in store.tiles:
+    for t in sorted(store.tiles, key=lambda t: -t.count):  # largest first: no long task left alone at the end
         tb = np.asarray(t.bounds)
         meet = np.all((bounds[:, :3] <= tb[3:]) & (bounds[:, 3:] >= tb[:3]), axis=1) if len(bounds) else np.zeros(0, bool)
         items.append(t.name)

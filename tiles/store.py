@@ -145,9 +145,9 @@ class TileStore:
         expected = self.tile(tname).count
         if values.ndim != 1 or len(values) != expected:
             raise ValueError(f"{name} for tile {tname}: {values.shape} values for {expected} points")
-        g = self.group[f"tiles/{tname}"]
-        g.create_array(name, shape=values.shape, dtype=values.dtype, chunks=(TILE_CHUNK,),
-                       compressors=tile_compressor(), overwrite=True)[:] = values
+        from tiles import zarrio  # (imports this module)
+
+        zarrio.write_array(paths.join(self.url, "tiles", tname), name, values, self.storage_options)
 
     def add_dimensions(self, dims: Sequence[Dimension]) -> None:
         """Declare arrays that now exist in every tile (called once, by the driver)."""
