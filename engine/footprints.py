@@ -24,3 +24,14 @@ def union_footprint(rects: list[list[float]], frame: Frame) -> tuple[dict[str, A
     world = affinity.affine_transform(geom, [c, -s, s, c, frame.origin[0], frame.origin[1]])
     world = shapely.set_precision(world, 1e-4)
     return mapping(world), area
+
+
+def union_geojson(geoms: list[dict[str, Any]]) -> tuple[dict[str, Any], float]:
+    """GeoJSON union of GeoJSON geometries (world x, y) and its area in m² (spaces joined after refinement)."""
+    from shapely.geometry import shape
+
+    shapes = [shape(g) for g in geoms if g.get("coordinates")]
+    if not shapes:
+        return {"type": "Polygon", "coordinates": []}, 0.0
+    world = shapely.set_precision(shapely.union_all(shapes), 1e-4)
+    return mapping(world), float(world.area)

@@ -75,6 +75,7 @@ from engine.dividers import DividerParams, vertical_params
 from engine.histograms import BoxIndex, Grid, share, tile_extents, tiles_by_size, tiles_touching, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
 from engine.refine import Refinement, clipped_footprint, face_side_space, refine_space, relabel
+from engine.rejoin import rejoin_pieces
 from engine.ridges import RidgeParams
 from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
 from tiles.schema import Dimension
@@ -133,6 +134,9 @@ class SpaceParams:
     refine_smooth: float = 1.5
     #: Ridge dividers (walls seen as one dense surface) in the refinement: :mod:`engine.ridges`.
     ridges: RidgeParams = field(default_factory=RidgeParams)
+    #: Refined pieces join their neighbours beyond the refined space through open faces
+    #: (:mod:`engine.rejoin`).
+    rejoin: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "walls", dataclasses.replace(self.walls, bin_width=self.bin_width))
@@ -159,7 +163,7 @@ class SpaceParams:
                      "min_storey_height", "upper_band", "merge_window",
                      "min_face", "min_space_area", "min_space_width", "min_relative_density", "min_open_ratio",
                      "min_scanned_density", "refine_min_area", "refine_snap_deg",
-                     "refine_separation_deg", "refine_min_second", "refine_block", "refine_smooth"):
+                     "refine_separation_deg", "refine_min_second", "refine_block", "refine_smooth", "rejoin"):
             if c.get(name) is not None:
                 kw[name] = c[name]
         if c.get("walls"):
@@ -400,6 +404,31 @@ class _RefinedPlan:
     clip: dict[int, list[int]]
     dividers: list[FoundDivider]
     n_spaces: int
+    #: After :meth:`regroup`: new space -> the spaces (before regrouping) it joins, when more than one,
+    #: and each cell's space before regrouping.
+    joined: dict[int, list[int]] = field(default_factory=dict)
+    before: np.ndarray | None = None
+    sub_before: dict[int, tuple[int, float]] = field(default_factory=dict)
+
+    def regroup(self, group: np.ndarray) -> None:
+        """Join spaces: ``group[s]`` is the space ``s`` joins (:func:`engine.rejoin.rejoin_pieces`); renumbered."""
+        group = np.asarray(group, dtype=np.int64)
+        if np.array_equal(group, np.arange(self.n_spaces)):
+            return
+        ids = np.unique(group)
+        new_of = np.searchsorted(ids, group)  # old space -> new space
+        remap = np.append(new_of, -1)  # -1 stays -1
+        self.before = self.labels.copy()
+        self.sub_before = dict(self.sub_of)
+        self.labels = remap[self.labels]
+        self.sides = remap[self.sides]
+        members: dict[int, list[int]] = {}
+        for old, new in enumerate(new_of.tolist()):
+            members.setdefault(new, []).append(old)
+        self.joined = {new: olds for new, olds in members.items() if len(olds) > 1}
+        self.sub_of = {int(new_of[old]): v for old, v in self.sub_before.items()
+                       if int(new_of[old]) not in self.joined}
+        self.n_spaces = len(ids)
 
     @classmethod
     def build(cls, cells: list[Box], edges: list[Edge], labels: np.ndarray, refs: list[Refinement],
@@ -422,30 +451,45 @@ class _RefinedPlan:
         owner = np.full(len(cells) + 1, -1, dtype=np.int64)
         for k, r in enumerate(kept):
             owner[1:][old == r.space] = k
-        all_cells, all_edges = list(cells), list(edges)
-        cell_yaw: list[float | None] = [None] * len(cells)
-        edge_yaw: list[float | None] = [None] * len(edges)
+        all_cells = list(cells)
         firsts, sub_of, clip, dividers = [], {}, {}, []
         origin = frame.origin if frame is not None else (0.0, 0.0, 0.0)
-        # building edges: the space on each side (a refined side: the new space at the face)
-        sides = np.full((len(edges), 2), -1, dtype=np.int64)
-        for i, e in enumerate(edges):
+        # building edges: the space on each side (a refined side: the new space at the face).  A face beside
+        # a refined space is sampled every face-step bins along it and cut where the new space on either side
+        # changes: one long building face may border several of the refinement's spaces (a hallway's end and
+        # a room), and each piece must connect the right pair.
+        def side(e: Edge, j: int, lo: int, at: float) -> int:
+            step = -2 if j == 0 else 2  # a lies below the face, b above
+            pt = [e.position + step, at] if e.axis == 0 else [at, e.position + step]
+            world = frame.to_world(np.asarray(pt, dtype=np.float64) * bin_width)
+            got = face_side_space(kept[ref_of[lo]], world, origin, bin_width)
+            return base[lo] + got if got >= 0 else -1
+
+        face_step = max(1, int(round(0.25 / bin_width)))
+        all_edges, rows = [], []
+        for e in edges:
             la, lb = int(old[e.a]), int(old[e.b])
-            if la == lb and la in ref_of:
-                continue  # inside a refined space: its refinement has its own faces
-            for j, (cell, lo) in enumerate(((e.a, la), (e.b, lb))):
-                if lo < 0:
-                    continue
-                if lo not in ref_of:
-                    sides[i, j] = new_id[lo]
-                    continue
-                step = -2 if j == 0 else 2  # a lies below the face, b above
-                mid = 0.5 * (e.overlap[0] + e.overlap[1])
-                pt = [e.position + step, mid] if e.axis == 0 else [mid, e.position + step]
-                world = frame.to_world(np.asarray(pt, dtype=np.float64) * bin_width)
-                r = kept[ref_of[lo]]
-                got = face_side_space(r, world, origin, bin_width)
-                sides[i, j] = base[lo] + got if got >= 0 else -1
+            if (la == lb and la in ref_of) or (la not in ref_of and lb not in ref_of):
+                # inside a refined space (its refinement has its own faces), or away from every refinement
+                inside = la == lb and la in ref_of
+                all_edges.append(e)
+                rows.append([-1 if inside or la < 0 else new_id[la], -1 if inside or lb < 0 else new_id[lb]])
+                continue
+            o0, o1 = e.overlap
+            marks = np.unique(np.r_[np.arange(o0, o1, face_step), o1 - 1]).astype(np.float64) + 0.5
+            pairs = [tuple(-1 if lo < 0 else (new_id[lo] if lo not in ref_of else side(e, j, lo, t))
+                           for j, lo in enumerate((la, lb))) for t in marks]
+            start = o0
+            for k in range(1, len(marks) + 1):
+                if k == len(marks) or pairs[k] != pairs[k - 1]:
+                    stop = o1 if k == len(marks) else int(0.5 * (marks[k - 1] + marks[k]))
+                    if stop > start:
+                        all_edges.append(dataclasses.replace(e, overlap=(start, stop)))
+                        rows.append(list(pairs[k - 1]))
+                    start = stop
+        sides = np.array(rows, dtype=np.int64).reshape(-1, 2)
+        cell_yaw: list[float | None] = [None] * len(cells)
+        edge_yaw: list[float | None] = [None] * len(all_edges)
         for k, r in enumerate(kept):
             firsts.append([])
             at = base[r.space]
@@ -551,6 +595,11 @@ def parse_spaces(store: TileStore, *, client: Client | None = None, params: Spac
     index = BoxIndex.build(floors_arr, np.array([c.row() for c in cells]).reshape(-1, 5))
     refs = _refine(store, grid, p, floors_arr, band_z, cells, comps.labels, index, client)
     plan = _RefinedPlan.build(cells, edges, comps.labels, refs, frame, p.bin_width)
+    if p.rejoin:
+        source = np.full(plan.n_spaces, -1, dtype=np.int64)
+        for sp_id, (k, _) in plan.sub_of.items():
+            source[sp_id] = k
+        plan.regroup(rejoin_pieces(plan.cells, plan.edges, plan.labels, plan.sides, source, p.bin_width, p.rules))
     seconds["refining"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -588,7 +637,7 @@ def parse_spaces(store: TileStore, *, client: Client | None = None, params: Spac
 def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]], dividers: list[FoundDivider],
               boxes: list[Box], edges: list[Edge], labels: np.ndarray, labelled: list[dict[str, Any]],
               tiles: list[str], n_spaces: int, plan: _RefinedPlan) -> SpaceParse:
-    from engine.footprints import union_footprint
+    from engine.footprints import union_footprint, union_geojson
 
     bw, zb = p.bin_width, p.z_bin
     oz = frame.origin[2]
@@ -619,16 +668,22 @@ def _assemble(store, p: SpaceParams, frame: Frame, floors: list[tuple[int, int]]
     for i, lab in enumerate(labels.tolist()):
         if lab >= 0:
             members_of[lab].append(i)
+    def footprint(rects: list[list[float]], sub: tuple[int, float] | None) -> tuple[dict[str, Any], float]:
+        if sub is None:
+            return union_footprint(rects, frame)
+        k, yaw = sub
+        return clipped_footprint(rects, Frame(yaw, frame.origin), [cells[i].box for i in plan.clip[k]], frame)
+
     spaces = []
     for s in range(n_spaces):
         members = members_of[s]
         rects = [cells[i].box for i in members]
-        if s in plan.sub_of:
-            k, yaw = plan.sub_of[s]
-            fp, area = clipped_footprint(rects, Frame(yaw, frame.origin), [cells[i].box for i in plan.clip[k]],
-                                         frame)
+        if s in plan.joined:  # spaces joined after refinement: the union of their footprints
+            parts = [footprint([cells[i].box for i in members if plan.before[i] == old], plan.sub_before.get(old))
+                     for old in plan.joined[s]]
+            fp, area = union_geojson([f for f, _ in parts])
         else:
-            fp, area = union_footprint(rects, frame)
+            fp, area = footprint(rects, plan.sub_of.get(s))
         nbs = [Neighbour(o, faces[(s, o)]) for o in nb_of.get(s, [])]
         zr = ([float(zmin[s]), float(zmax[s])] if np.isfinite(zmin[s])
               else list(floor_list[boxes[members[0]].floor].z_range))
