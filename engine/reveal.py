@@ -7,8 +7,10 @@ voxel off along the wall's normal overlaps it by nothing, and one placed right
 by at most the voxel's share of the depth.  After NMS, along each horizontal
 axis where such a detection is at most ``thin-voxels`` voxels deep, its extent
 becomes the span of the points in the box grown by ``reveal-grow`` metres on
-both sides along that axis (the ``reveal-quantile`` and ``1 - reveal-quantile``
-quantiles of their coordinates: a few stray points do not widen it): the
+both sides along that axis, without its bottom and top voxel layers (the floor
+in front of a door, a ceiling), from the ``reveal-quantile`` to the ``1 -
+reveal-quantile`` quantile of their coordinates (a few stray points do not
+widen it): the
 jambs behind the wall face, the casing and the leaf of a door; the board and
 nothing behind it.  The box never shrinks below half its voxel depth, and its
 position along the wall, its height and its score are unchanged.
@@ -101,5 +103,7 @@ def refine_reveals(lo: np.ndarray, hi: np.ndarray, lo_m: np.ndarray, hi_m: np.nd
             g = int(np.ceil(settings.grow / vox[a] - 1e-9))
             blo, bhi = lo[i].copy(), hi[i].copy()
             blo[a], bhi[a] = max(lo[i, a] - g, 0), min(hi[i, a] + g, n[a])
+            if bhi[2] - blo[2] >= 3:  # not the bottom and top layers: the floor in front, the ceiling
+                blo[2], bhi[2] = blo[2] + 1, bhi[2] - 1
             pts = index.points_in(blo, bhi)[:, a]
             lo_m[i, a], hi_m[i, a] = point_span(pts, lo_m[i, a], hi_m[i, a], settings.quantile, 0.5 * vox[a])
