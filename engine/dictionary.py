@@ -14,9 +14,13 @@ IoU is invariant to rescaling an axis, so this is still the IoU of two boxes.
 
 Each cluster gives one window: size = the mean of its members' sizes, occupancy
 = the cell-wise mode (majority) of their patterns.  Along each axis the window
-keeps its size *relative* to the space (unit cube) or *absolute* (metres),
-whichever its members vary less in (coefficient of variation): a wall window is
-as long as the room, a chair window as big as a chair.
+keeps its size *relative* to the space (unit cube) only where its members vary
+clearly less in that frame than in metres (coefficient of variation at most
+``relative_ratio`` times, default half: a wall window is as long as the room, a
+chair window as big as a chair, and a board 1.2-2.4 m wide in rooms of any size,
+which varies about as much in both frames, keeps metres instead of growing to
+4 m in a long room); a single member is relative where it spans at least half
+the space.
 """
 from __future__ import annotations
 
@@ -91,11 +95,16 @@ class WindowDictionary:
         ``min_gap`` of 0 (near-identical) always share a window.
     damping, max_iter, random_state
         Passed to :class:`sklearn.cluster.AffinityPropagation`.
+    relative_ratio
+        An axis of a window is relative (follows the space) when its members' coefficient of
+        variation in the unit cube is at most this fraction of theirs in metres; where neither varies
+        (one member), when it spans at least half the space.  None: the rule of models written
+        before this parameter existed (relative when it varies at most as much as in metres).
     """
 
     def __init__(self, k: int = 4, *, iou_weight: float = 0.5, preference_quantile: float = 0.5,
                  max_instances: int = 400, max_atoms: int = 12, damping: float = 0.7, max_iter: int = 500,
-                 min_gap: float = 0.1, random_state: int = 0):
+                 min_gap: float = 0.1, random_state: int = 0, relative_ratio: float | None = 0.5):
         self.k = k
         self.iou_weight = iou_weight
         self.preference_quantile = preference_quantile
@@ -105,6 +114,7 @@ class WindowDictionary:
         self.max_iter = max_iter
         self.min_gap = min_gap
         self.random_state = random_state
+        self.relative_ratio = relative_ratio
 
     def _validate(self) -> None:
         if int(self.k) < 1:
@@ -193,7 +203,14 @@ class WindowDictionary:
         def cv(s):
             return s.std(axis=0) / np.maximum(s.mean(axis=0), 1e-9)
 
-        relative = cv(unit) <= cv(metric)
+        cu, cm = cv(unit), cv(metric)
+        # relative only where the members clearly follow their spaces (a board 1.2-2.4 m wide in rooms of
+        # any size varies as much in both frames: it keeps metres, else it grows with the room); members
+        # of one size in both frames (a single instance): relative where they span most of the space
+        if self.relative_ratio is None:  # the rule of models written before relative_ratio existed
+            relative = cu <= cm
+        else:
+            relative = np.where((cu < 1e-9) & (cm < 1e-9), unit.mean(axis=0) >= 0.5, cu <= self.relative_ratio * cm)
         occupancy = occ.reshape(len(occ), -1).mean(axis=0).reshape(occ.shape[1:]) >= 0.5
         return Atom(int(c), unit.mean(axis=0), metric.mean(axis=0), relative, occupancy, int(len(unit)))
 
@@ -214,11 +231,12 @@ class WindowDictionary:
     def params(self) -> dict[str, Any]:
         return {"k": int(self.k), "iou_weight": self.iou_weight, "preference_quantile": self.preference_quantile,
                 "max_instances": self.max_instances, "max_atoms": self.max_atoms, "damping": self.damping,
-                "max_iter": self.max_iter, "min_gap": self.min_gap, "random_state": self.random_state}
+                "max_iter": self.max_iter, "min_gap": self.min_gap, "random_state": self.random_state,
+                "relative_ratio": self.relative_ratio}
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], params: dict[str, Any]) -> "WindowDictionary":
-        d = cls(**params)
+        d = cls(**{"relative_ratio": None, **params})  # older models: the rule they were fitted with
         d.atoms_ = [Atom(int(c), us.astype(np.float64), ms.astype(np.float64), rel.astype(bool), occ.astype(bool),
                          int(n))
                     for c, us, ms, rel, occ, n in zip(arrays["atom_class"], arrays["atom_unit_size"],

@@ -5,7 +5,7 @@ proud of the face (11-24 cm), a board's from its face to the wall behind it
 (10 cm): about one voxel of the detector's 0.1 m grid, so a window placed one
 voxel off along the wall's normal overlaps it by nothing, and one placed right
 by at most the voxel's share of the depth.  After NMS, along each horizontal
-axis where such a detection is at most ``thin-voxels`` voxels deep, its extent
+axis where such a detection is at most ``reveal-thin-voxels`` voxels deep, its extent
 becomes the span of the points in the box grown by ``reveal-grow`` metres on
 both sides along that axis, without its bottom and top voxel layers (the floor
 in front of a door, a ceiling), from the ``reveal-quantile`` to the ``1 -
@@ -51,7 +51,7 @@ class RevealSettings:
     def from_config(cls, **overrides: Any) -> "RevealSettings":
         kw: dict[str, Any] = {}
         for name, key in (("classes", "reveal-classes"), ("grow", "reveal-grow"), ("quantile", "reveal-quantile"),
-                          ("thin_voxels", "thin-voxels")):
+                          ("thin_voxels", "reveal-thin-voxels")):
             v = config.get(f"detection.{key}")
             if v is not None:
                 kw[name] = v if name == "classes" else type(getattr(cls, name))(v)

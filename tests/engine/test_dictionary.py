@@ -86,3 +86,30 @@ def test_parameters_are_validated():
         WindowDictionary(k=K, damping=0.2).fit(cls, unit, metric, occ)
     with pytest.raises(ValueError):
         WindowDictionary(k=3).fit(cls, unit, metric, occ)
+
+
+def test_relative_only_where_the_members_clearly_follow_the_room():
+    rng = np.random.default_rng(5)
+    n = 12
+    rooms = rng.uniform([5, 3, 2.8], [9, 18, 3.2], (n, 3))
+    # boards 0.1 m deep, 1.1 m high, a little wider in wider rooms (as generated conference rooms have)
+    metric = np.stack([rooms[:, 0] * 0.25 * rng.uniform(0.75, 1.25, n), np.full(n, 0.1),
+                       rng.uniform(1.05, 1.15, n)], axis=1)
+    cv = lambda s: s.std() / s.mean()  # noqa: E731
+    assert 0.5 * cv(metric[:, 0]) < cv(metric[:, 0] / rooms[:, 0]) < cv(metric[:, 0])
+    occ = np.ones((n, K, K, K), bool)
+    d = WindowDictionary(k=K, min_gap=1.0).fit(np.full(n, CLASS_CODES["board"]), metric / rooms, metric, occ)
+    [atom] = d.atoms_
+    assert not atom.relative.any()  # the old rule (cv in the unit cube <= cv in metres) made x relative
+    legacy = WindowDictionary(k=K, min_gap=1.0, relative_ratio=None).fit(
+        np.full(n, CLASS_CODES["board"]), metric / rooms, metric, occ)
+    assert legacy.atoms_[0].relative[0]
+    # one wall and one chair: the wall spans its room's length and height, the chair keeps metres
+    d = WindowDictionary(k=K).fit(np.array([CLASS_CODES["wall"], CLASS_CODES["chair"]]),
+                                  np.array([[0.97, 0.01, 1.0], [0.1, 0.12, 0.3]]),
+                                  np.array([[6.0, 0.03, 3.0], [0.5, 0.6, 0.9]]), np.ones((2, K, K, K), bool))
+    assert d.atoms_of(CLASS_CODES["wall"])[0].relative.tolist() == [True, False, True]
+    assert not d.atoms_of(CLASS_CODES["chair"])[0].relative.any()
+    # a model written before the parameter existed reads back with the rule it was fitted with
+    back = WindowDictionary.from_arrays(d.to_arrays(), {k: v for k, v in d.params().items() if k != "relative_ratio"})
+    assert back.relative_ratio is None and WindowDictionary.from_arrays(d.to_arrays(), d.params()).relative_ratio == 0.5
