@@ -59,7 +59,7 @@ class RidgeParams:
     """Physical parameters (metres) and ratios of the ridge search; see the module docstring."""
 
     #: Ridge density in the low slice over the chunk's room level (0: no ridges).
-    ratio: float = 1.5
+    ratio: float = 1.25
     #: Height of the low slice: the lowest part of the upper band (metres).
     low: float = 0.1
     #: Width of the ridge window and the gap between it and each side window.
