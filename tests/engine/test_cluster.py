@@ -124,3 +124,14 @@ def test_long_commands_print_progress_and_the_dashboard(client, tmp_path, capsys
     err = capsys.readouterr().err
     assert f"dask: {client.scheduler.address}; dashboard: http" in err
     assert "reading parts: " in err and "writing tiles: " in err
+
+
+def test_workers_keep_freed_memory_for_the_next_task(client):
+    # tiles.yaml replaces distributed's MALLOC_TRIM_THRESHOLD_ of 64 KB (fresh pages for every large array)
+    import os
+
+    want = ("268435456", "268435456")
+    assert (dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"),
+            dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_")) == tuple(map(int, want))
+    got = client.run(lambda: (os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("MALLOC_MMAP_THRESHOLD_")))
+    assert set(got.values()) == {want}
