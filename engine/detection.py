@@ -110,15 +110,19 @@ class DetectionSettings:
 
 
 class PointIndex:
-    """A space's canonical points sorted by voxel, so that the points of a voxel box are a few slices."""
+    """A space's canonical points sorted by voxel, so that the points of a voxel box are a few slices.
 
-    def __init__(self, metric: np.ndarray, grid: mom.VoxelGrid):
+    (Sorted once, by :func:`engine.moments.voxel_order`: the refined boxes are
+    few but large, floors and ceilings holding a third of the points each, and
+    gathering them through the order box by box costs more than one sort.)
+    """
+
+    def __init__(self, metric: np.ndarray, grid: mom.VoxelGrid, flat: np.ndarray | None = None):
         self.grid = grid
-        idx = grid.index(metric)
-        flat = np.ravel_multi_index((idx[:, 0], idx[:, 1], idx[:, 2]), grid.shape)
-        order = np.argsort(flat, kind="stable")
-        self.points = metric[order]
-        self.offsets = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=int(np.prod(grid.shape))))])
+        flat = grid.flat_index(metric) if flat is None else flat
+        n_cells = int(np.prod(grid.shape))
+        self.points = metric[mom.voxel_order(flat, n_cells)]
+        self.offsets = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=n_cells))])
 
     def points_in(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Canonical points ``(m, 3)`` of the voxel box ``[lo, hi)``."""
@@ -395,8 +399,13 @@ def detect_space(points: SpacePoints, model: Model, settings: DetectionSettings 
     settings = settings or DetectionSettings.from_config()
     if len(points.xyz) < max(settings.min_window_points, 4):
         return []
-    vol = prepare_space(points, model, space_frame(points, connection))
-    index = PointIndex(vol.frame.to_metric(points.xyz), vol.grid) if settings.refine else None
+    # one pass of preparation: canonical points and their voxels, shared by the moments and the index
+    frame = space_frame(points, connection)
+    metric = frame.to_metric(points.xyz)
+    grid = mom.VoxelGrid.covering(frame.extent, model.voxel, model.max_cells)
+    flat = grid.flat_index(metric)
+    vol = SpaceVolume.from_metric(metric, points.rgb, frame, grid, model.layout.colour, flat)
+    index = PointIndex(metric, grid, flat) if settings.refine else None
     det = detect_in_volume(vol, model, settings, index)
     return to_proposals(det, vol, model, points.space_id, np.zeros(3) if origin is None else origin)
 

@@ -81,13 +81,20 @@ def normalise_colours(rgb: np.ndarray | None, mode: str = "space-median") -> np.
     any exposure give the same features; values may exceed 1.  A space without
     colours, or whose median luminance is 0, is returned unchanged.
     """
+    factor = colour_factor(rgb, mode)
+    if rgb is None or factor == 1.0:
+        return rgb
+    return np.asarray(rgb, dtype=np.float64) * factor
+
+
+def colour_factor(rgb: np.ndarray | None, mode: str = "space-median") -> float:
+    """The factor :func:`normalise_colours` multiplies a space's colours by (1.0 when it leaves them)."""
     if mode not in COLOUR_MODES:
         raise ValueError(f"unknown colour normalisation {mode!r}; known: {COLOUR_MODES}")
     if rgb is None or mode == "none" or len(rgb) == 0:
-        return rgb
-    rgb = np.asarray(rgb, dtype=np.float64)
-    med = float(np.median(rgb.mean(axis=1)))
-    return rgb * (COLOUR_TARGET / med) if med > 0 else rgb
+        return 1.0
+    med = float(np.median(np.asarray(rgb, dtype=np.float64).mean(axis=1)))
+    return COLOUR_TARGET / med if med > 0 else 1.0
 
 
 def tent_code(x: np.ndarray, centres) -> np.ndarray:
@@ -267,8 +274,19 @@ class SpaceVolume:
         ``colour`` normalises the colours first (:func:`normalise_colours`; a model's ``layout.colour``).
         """
         grid = mom.VoxelGrid.covering(frame.extent, voxel, max_cells)
-        m = mom.voxel_moments(frame.to_metric(xyz), normalise_colours(rgb, colour), grid)
-        return cls(frame, grid, mom.integral_volume(m), int(len(xyz)))
+        return cls.from_metric(frame.to_metric(xyz), rgb, frame, grid, colour)
+
+    @classmethod
+    def from_metric(cls, metric: np.ndarray, rgb: np.ndarray | None, frame: Any, grid: mom.VoxelGrid,
+                    colour: str = "none", flat: np.ndarray | None = None) -> "SpaceVolume":
+        """:meth:`build` from points already in canonical metres (``frame.to_metric``) on a chosen grid.
+
+        ``flat`` is their :meth:`engine.moments.VoxelGrid.flat_index` when the caller has it.
+        The colours are scaled by :func:`colour_factor` column by column as they are summed
+        (the same values as :func:`normalise_colours`, without a normalised copy).
+        """
+        m = mom.voxel_moments(metric, rgb, grid, flat, rgb_scale=colour_factor(rgb, colour))
+        return cls(frame, grid, mom.integral_volume(m), int(len(metric)))
 
     def voxel_box(self, position: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unit-cube boxes ``(n, 3)`` snapped to voxel boxes ``[lo, hi)`` inside the grid.

@@ -100,7 +100,7 @@ def voxel_order(flat: np.ndarray, n_cells: int) -> np.ndarray:
 
 
 def voxel_moments(xyz: np.ndarray, rgb: np.ndarray | None, grid: VoxelGrid,
-                  flat: np.ndarray | None = None) -> np.ndarray:
+                  flat: np.ndarray | None = None, rgb_scale: float = 1.0) -> np.ndarray:
     """Moments ``(nx, ny, nz, 13)`` of the points in every voxel, in one pass.
 
     Parameters
@@ -113,6 +113,8 @@ def voxel_moments(xyz: np.ndarray, rgb: np.ndarray | None, grid: VoxelGrid,
         The voxel grid.
     flat
         The points' :meth:`VoxelGrid.flat_index`, when the caller already has it.
+    rgb_scale
+        The colours are summed times this factor (``rgb[:, a] * rgb_scale``, column by column).
 
     Returns a view of a channel-major array (``integral_volume`` copies it anyway).
     """
@@ -130,9 +132,10 @@ def voxel_moments(xyz: np.ndarray, rgb: np.ndarray | None, grid: VoxelGrid,
     if rgb is None:
         out[10:] = 0.0
     else:
+        rgb = np.asarray(rgb, dtype=np.float64)
         for a in range(3):
-            out[10 + a] = np.bincount(flat, weights=np.ascontiguousarray(rgb[:, a], dtype=np.float64),
-                                      minlength=ncell)
+            col = rgb[:, a] * rgb_scale if rgb_scale != 1.0 else np.ascontiguousarray(rgb[:, a])
+            out[10 + a] = np.bincount(flat, weights=col, minlength=ncell)
     return out.T.reshape(*grid.shape, N_CHANNELS)
 
 
