@@ -77,14 +77,18 @@ def color_scale(store) -> float | None:
 def load_space(store, ref: SpaceRef, space_array: str = "space_id", *, truth: bool = False) -> SpacePoints:
     """Read one space's points from the tiles it touches (inside a task)."""
     has_color = color_scale(store) is not None
-    cols = [space_array] + (list(COLOR_COLUMNS) if has_color else []) + (["gt_class", "gt_instance"] if truth else [])
+    cols = (list(COLOR_COLUMNS) if has_color else []) + (["gt_class", "gt_instance"] if truth else [])
     xyz, rgb, gcls, ginst = [], [], [], []
     for tile in ref.tiles:
-        data = store.read(tile, cols)
-        sel = np.nonzero(data[space_array] == ref.space_id)[0]
+        sel = np.nonzero(store.read(tile, [space_array])[space_array] == ref.space_id)[0]
         if not len(sel):
             continue
-        xyz.append(store.xyz(tile)[sel])
+        # a tile's points are stored in spatial order: a space's rows are a few of its chunks, and
+        # only the span from its first to its last row is read and decoded
+        start, stop = int(sel[0]), int(sel[-1]) + 1
+        sel -= start
+        data = store.read(tile, cols, start, stop)
+        xyz.append(store.xyz(tile, start=start, stop=stop)[sel])
         if has_color:
             rgb.append(np.stack([data[c][sel] for c in COLOR_COLUMNS], axis=1))
         if truth:
