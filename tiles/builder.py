@@ -326,9 +326,13 @@ class StoreBuilder:
                 lo[key] = np.minimum(lo.get(key, mn), mn)
                 hi[key] = np.maximum(hi.get(key, mx), mx)
         keys = sorted(runs)
-        jobs = [(key, runs[key]) for key in keys]
-        counts = run_tasks(_build_tile, jobs, client=client, label="writing tiles",
-                           keys=[tile_name(*k) for k in keys], extra_args=(self, firsts, [(s.count, s.constants) for s in summaries]))
+        # largest tiles first: no long tile task left alone at the end of the batch
+        by_size = sorted(keys, key=lambda k: -sum(c for _, _, c in runs[k]))
+        built = run_tasks(_build_tile, [(key, runs[key]) for key in by_size], client=client, label="writing tiles",
+                          keys=[tile_name(*k) for k in by_size],
+                          extra_args=(self, firsts, [(s.count, s.constants) for s in summaries]))
+        built_of = dict(zip(by_size, built))
+        counts = [built_of[k] for k in keys]
         if sum(counts) != total:
             raise RuntimeError(f"tile build lost points: {sum(counts)} stored of {total}")
         scale, offset = np.asarray(self.scale), np.asarray(self.offset)
