@@ -15,6 +15,15 @@ figure is the whole run's seconds over that floor (lower is better); the
 2-worker speed-up over 1 worker is tracked too (target >= 1.8), and the run's
 ARI and mAP as quality.
 
+Where each stage's time goes (the ``profile`` table, per cluster size and
+stage, from the previous stage line to its own): wall seconds, CPU seconds of
+the driver process (the pipeline, the client and the in-process scheduler) and
+of the workers, seconds of task computation (dask's task stream), idle
+worker-seconds (``workers * wall - task seconds``), and the seconds during
+which no task ran at all (driver-only work, barriers) or only one worker was
+busy (the serial fraction).  Unlike wall-clock ratios, these stay meaningful
+on a loaded machine.
+
 ``--quick`` (CI): a ~60 m² building at low density, 2 workers only.
 The large documented run (README, "Performance")::
 
@@ -113,6 +122,77 @@ def stage_peaks(trace: MemoryTrace, said: list[tuple[float, str]], start: float)
     return out
 
 
+def _cpu_by_process(worker_pids: set[int]) -> tuple[float, float]:
+    """CPU seconds (user + system) so far of this process (the driver, with the scheduler's thread) and of the
+    dask worker processes together."""
+    import psutil
+
+    def cpu(p: psutil.Process) -> float:
+        try:
+            t = p.cpu_times()
+            return t.user + t.system
+        except psutil.Error:
+            return 0.0
+
+    me = psutil.Process(os.getpid())
+    return cpu(me), sum(cpu(p) for p in me.children(recursive=True) if p.pid in worker_pids)
+
+
+def _busy_profile(intervals: list[list[tuple[float, float]]], lo: float, hi: float) -> dict[str, float]:
+    """Seconds of ``[lo, hi]`` during which no worker, exactly one, or all workers ran a task.
+
+    ``intervals`` holds, per worker, the (start, stop) of its task computations.
+    """
+    edges: list[tuple[float, int]] = []
+    for spans in intervals:
+        for a, b in spans:
+            a, b = max(a, lo), min(b, hi)
+            if b > a:
+                edges += [(a, 1), (b, -1)]
+    edges.sort()
+    level, t, hist = 0, lo, [0.0] * (len(intervals) + 2)
+    for x, d in edges:
+        hist[min(level, len(hist) - 1)] += x - t
+        level, t = level + d, x
+    hist[min(level, len(hist) - 1)] += hi - t
+    return {"none_busy_s": hist[0], "one_busy_s": hist[1] if len(intervals) > 1 else 0.0,
+            "all_busy_s": hist[len(intervals)]}
+
+
+def stage_profile(stream: list[dict[str, Any]], marks: list[tuple[float, str, float, float]],
+                  start: tuple[float, float, float], workers: int) -> list[dict[str, Any]]:
+    """Where each stage's wall time went: driver and worker CPU, task time, idle worker time.
+
+    ``marks`` are the pipeline's stage lines with (epoch time, line, driver CPU,
+    workers' CPU) when said; ``start`` the same three at the start of the run.
+    Per stage (from the previous line to its own): wall seconds, driver CPU s
+    (its whole process: scheduler, client, the pipeline's own work), workers'
+    CPU s, task seconds (sum of the task stream's compute spans), worker-seconds
+    idle (``workers * wall - task seconds``), seconds with no task running at
+    all (driver-only time, barriers) and with exactly one worker busy.
+    """
+    per_worker: dict[str, list[tuple[float, float]]] = {}
+    for t in stream:
+        for s in t.get("startstops", ()):
+            if s.get("action") == "compute":
+                per_worker.setdefault(str(t.get("worker")), []).append((s["start"], s["stop"]))
+    intervals = list(per_worker.values()) + [[] for _ in range(max(0, workers - len(per_worker)))]
+    rows, (t_prev, d_prev, w_prev) = [], start
+    for t, line, d_cpu, w_cpu in marks:
+        stage = next((k for k, heads in STAGE_LINES.items() if line.startswith(heads)), None)
+        if stage is None and line != "end":
+            continue
+        wall = t - t_prev
+        task = sum(min(b, t) - max(a, t_prev) for spans in intervals for a, b in spans if b > t_prev and a < t)
+        busy = _busy_profile(intervals, t_prev, t)
+        rows.append({"stage": stage or "metrics+outputs", "wall_s": round(wall, 2),
+                     "driver_cpu_s": round(d_cpu - d_prev, 2), "worker_cpu_s": round(w_cpu - w_prev, 2),
+                     "task_s": round(task, 2), "idle_worker_s": round(workers * wall - task, 2),
+                     **{k: round(v, 2) for k, v in busy.items()}})
+        t_prev, d_prev, w_prev = t, d_cpu, w_cpu
+    return rows
+
+
 def measure(source: str, out: str, workers: int, model: str | None, *, verbose: bool = False) -> dict[str, Any]:
     """One forced run on a fresh LocalCluster of ``workers`` single-threaded workers."""
     from distributed import Client, LocalCluster, get_task_stream
@@ -120,22 +200,29 @@ def measure(source: str, out: str, workers: int, model: str | None, *, verbose: 
     from engine.pipeline import RunOptions, run
 
     said: list[tuple[float, str]] = []
+    marks: list[tuple[float, str, float, float]] = []
+    worker_pids: set[int] = set()
 
     def say(line: str) -> None:
         said.append((time.perf_counter(), line))
+        marks.append((time.time(), line, *_cpu_by_process(worker_pids)))
         if verbose:
             print(line, flush=True)
 
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                       silence_logs=logging.ERROR, memory_limit="8GiB") as cluster, Client(cluster) as client:
         client.run(lambda: __import__("engine.detection"))  # warm imports on the workers
+        worker_pids.update(client.run(os.getpid).values())
         with MemoryTrace() as mem, get_task_stream(client) as ts:
+            start = (time.time(), *_cpu_by_process(worker_pids))
             t0 = time.perf_counter()
             metrics = run(source, out, client=client, options=RunOptions(model=model, force=True, say=say))
             total = time.perf_counter() - t0
+            marks.append((time.time(), "end", *_cpu_by_process(worker_pids)))
         stream = ts.data
     return {"metrics": metrics, "seconds": total, "peak_total": mem.peak_total, "peak_single": mem.peak_single,
-            "stage_memory": stage_peaks(mem, said, t0), "tasks": _task_table(stream), "task_count": len(stream)}
+            "stage_memory": stage_peaks(mem, said, t0), "tasks": _task_table(stream), "task_count": len(stream),
+            "profile": stage_profile(stream, marks, start, workers)}
 
 
 def run(quick: bool = False, *, area: float | None = None, density: float | None = None, floors: int | None = None,
@@ -153,7 +240,7 @@ def run(quick: bool = False, *, area: float | None = None, density: float | None
     dask.config.set({"buildingparser.progress": "never"})
     work = keep or tempfile.mkdtemp(prefix="bench-run-")
     os.makedirs(work, exist_ok=True)
-    rows, tasks, runs = [], [], {}
+    rows, tasks, runs, profiles = [], [], {}, []
     try:
         t = time.perf_counter()
         source_given = source is not None
@@ -182,6 +269,7 @@ def run(quick: bool = False, *, area: float | None = None, density: float | None
                              "points_per_s": round(n / s) if s >= 0.01 else None, **mem})
             if w == max(p["workers"]):
                 tasks = r["tasks"]
+            profiles += [{"workers": w, **row} for row in r["profile"]]
         best = runs[max(p["workers"])]
         m = best["metrics"]
         det = m.get("detection") or {}
@@ -204,7 +292,8 @@ def run(quick: bool = False, *, area: float | None = None, density: float | None
     finally:
         if not keep:
             shutil.rmtree(work, ignore_errors=True)
-    return {"name": "run", "rows": rows, "summary": summary, "tasks": tasks, "tracked": tracked}
+    return {"name": "run", "rows": rows, "summary": summary, "tasks": tasks, "profile": profiles,
+            "tracked": tracked}
 
 
 def main() -> None:
@@ -225,6 +314,7 @@ def main() -> None:
                  store=a.store, keep=a.keep, source=a.source, verbose=a.verbose)
     common.report(result)
     print(common.format_table(result["tasks"]))
+    print(common.format_table(result["profile"]))
     if a.json:
         with open(a.json, "w") as f:
             json.dump(result, f, indent=2, default=float)

@@ -1,0 +1,30 @@
+"""bench_run's stage profile: idle and serial time from a task stream and the stage lines."""
+from __future__ import annotations
+
+import pytest
+
+from benchmarks.bench_run import _busy_profile, stage_profile
+
+
+def test_busy_profile_splits_the_window_by_how_many_workers_run():
+    # worker a busy 0-4, worker b busy 2-6 and 7-8; window 0-10
+    p = _busy_profile([[(0.0, 4.0)], [(2.0, 6.0), (7.0, 8.0)]], 0.0, 10.0)
+    assert p == pytest.approx({"none_busy_s": 3.0, "one_busy_s": 5.0, "all_busy_s": 2.0})
+    clipped = _busy_profile([[(0.0, 4.0)], [(2.0, 6.0)]], 3.0, 5.0)  # spans cut at the window
+    assert clipped == pytest.approx({"none_busy_s": 0.0, "one_busy_s": 1.0, "all_busy_s": 1.0})
+
+
+def test_stage_profile_charges_tasks_and_cpu_to_the_stage_they_ran_in():
+    stream = [{"worker": "a", "startstops": [{"action": "compute", "start": 1.0, "stop": 3.0}]},
+              {"worker": "b", "startstops": [{"action": "compute", "start": 2.0, "stop": 12.0},
+                                             {"action": "transfer", "start": 0.0, "stop": 1.0}]}]
+    marks = [(5.0, "ingest: 10 points", 2.0, 6.0), (6.0, "not a stage line", 2.5, 7.0),
+             (14.0, "spaces: 1 spaces", 3.0, 14.0), (15.0, "end", 4.0, 14.0)]
+    rows = stage_profile(stream, marks, (0.0, 1.0, 0.0), workers=2)
+    assert [r["stage"] for r in rows] == ["ingest", "spaces", "metrics+outputs"]
+    ingest, spaces, rest = rows
+    assert (ingest["wall_s"], ingest["driver_cpu_s"], ingest["worker_cpu_s"]) == (5.0, 1.0, 6.0)
+    assert ingest["task_s"] == 5.0 and ingest["idle_worker_s"] == 5.0  # a: 1-3, b: 2-5
+    assert (ingest["none_busy_s"], ingest["one_busy_s"], ingest["all_busy_s"]) == (1.0, 3.0, 1.0)
+    assert spaces["task_s"] == 7.0 and spaces["none_busy_s"] == 2.0 and spaces["one_busy_s"] == 7.0
+    assert rest["task_s"] == 0.0 and rest["none_busy_s"] == 1.0 and rest["driver_cpu_s"] == 1.0
