@@ -201,6 +201,45 @@ def global_features(position: np.ndarray, size: np.ndarray, metric_size: np.ndar
     return np.concatenate(parts, axis=-1)
 
 
+def global_scores(positions: tuple[np.ndarray, np.ndarray, np.ndarray], shape: np.ndarray, grid_shape,
+                  voxel: np.ndarray, weights: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """The global block's share of linear scores of one window shape at a grid of positions, separably.
+
+    Parameters
+    ----------
+    positions
+        Window starts (voxels) along x, y and z.
+    shape
+        The window's size in voxels ``(3,)``.
+    grid_shape, voxel
+        The space's grid: voxels per axis and voxel size (metres) per axis.
+    weights
+        ``(m, n_global)`` weights of the global block.
+
+    Returns
+    -------
+    ``terms`` (per axis ``(m, n_a)``) and ``const`` ``(m,)``: for the window at
+    ``(px[i], py[j], pz[k])``, ``global_features(...) @ weights[j]`` equals
+    ``terms[0][j, i] + terms[1][j, j'] + terms[2][j, k] + const[j]`` up to the
+    order of the sums.  Every global feature depends on one axis's position
+    (P and its code) or on none (the size codes), so the block costs a few
+    numbers per position along each axis instead of a vector per window.
+    """
+    n = np.asarray(grid_shape)
+    shape = np.asarray(shape)
+    size = shape / n
+    weights = np.asarray(weights, dtype=np.float64)
+    nt = len(UNIT_TENTS)
+    terms = []
+    for a in range(3):
+        p = np.asarray(positions[a]) / n[a]
+        code = tent_code(p + size[a] / 2.0, UNIT_TENTS)  # (n_a, 5): the position code's columns of axis a
+        terms.append(weights[:, a, None] * p[None] + weights[:, 3 + a * nt:3 + (a + 1) * nt] @ code.T)
+    cut = 3 + 3 * nt  # then S, its code and the metric code: the same for every position
+    const = weights[:, cut:] @ global_features(np.zeros(3), size, shape * np.asarray(voxel))[cut:]
+    return terms, const
+
+
 def local_features(sums: np.ndarray, n_window: np.ndarray, k: int, min_points: int = 1) -> np.ndarray:
     """Local features ``(..., 9)`` of sub-boxes from their moment sums ``(..., 13)``.
 
@@ -265,6 +304,14 @@ class SpaceVolume:
     grid: mom.VoxelGrid
     iv: np.ndarray
     n_points: int
+
+    @property
+    def count_iv(self) -> np.ndarray:
+        """The integral volume of point counts alone ``(nx+1, ny+1, nz+1, 1)``, contiguous (made once)."""
+        cached = self.__dict__.get("_count_iv")
+        if cached is None or cached[0] is not self.iv:
+            cached = self.__dict__["_count_iv"] = (self.iv, np.ascontiguousarray(self.iv[..., :1]))
+        return cached[1]
 
     @classmethod
     def build(cls, xyz: np.ndarray, rgb: np.ndarray | None, frame: Any, voxel: float,

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine import moments as mom
-from engine.features import LOCAL_SIZE, FeatureLayout, SpaceVolume, global_features, local_features, sub_bounds
+from engine.features import LOCAL_SIZE, FeatureLayout, SpaceVolume, global_scores, local_features, sub_bounds
 
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000
@@ -215,16 +215,15 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
     uz, iz = _intervals(pz, int(shape[2]), k)
     # window counts, and the global part where a window holds enough points (elsewhere -inf)
     win = lambda p, s: np.stack([p, p + s], axis=1)  # noqa: E731
-    counts = mom.box_sums_grid(vol.iv[..., :1], win(px, shape[0]), win(py, shape[1]), win(pz, shape[2]))[..., 0]
+    iv_n = vol.count_iv  # the counts alone: window counts, and which sub-boxes are occupied
+    counts = mom.box_sums_grid(iv_n, win(px, shape[0]), win(py, shape[1]), win(pz, shape[2]))[..., 0]
     valid = counts >= min_points
     acc = np.zeros((2 * m,) + counts.shape)  # per model: the linear part, then the ratio's weighted raw counts
-    if valid.any():
-        vi = np.nonzero(valid)
-        lo = np.stack([px[vi[0]], py[vi[1]], pz[vi[2]]], axis=-1)
-        size = np.broadcast_to(shape, lo.shape)
-        g = global_features(lo / n, size / n, size * grid.voxel)
-        for j in range(m):
-            acc[j][valid] = g @ wg[j] + bias[j]
+    # the global part, separable: a term per position along each axis and a constant per shape
+    terms, const = global_scores((px, py, pz), shape, n, grid.voxel, wg)
+    for j in range(m):
+        acc[j] = terms[0][j][:, None, None] + terms[1][j][None, :, None] + terms[2][j][None, None, :]
+        acc[j] += const[j] + bias[j]
     # local part, in batches of x positions so that the sub-box count table stays bounded.  Only
     # the occupied sub-boxes get local features (they are all zero elsewhere; in a room most
     # sub-boxes are air), and only they are scattered to the windows and slots that hold them
@@ -238,7 +237,6 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
         w2[..., j] = wl[j].reshape(k, k, k, -1)
         w2[..., 1, j] = 0.0
         w2[..., 1, m + j] = wl[j, :, 1].reshape(k, k, k)
-    iv_n = np.ascontiguousarray(vol.iv[..., :1])  # the counts alone find the occupied sub-boxes
     for s in range(0, len(px), per_x):
         sl = slice(s, s + per_x)
         need, sub_ix = np.unique(ix[sl], return_inverse=True)

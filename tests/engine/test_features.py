@@ -6,7 +6,7 @@ import pytest
 
 from engine import moments as mom
 from engine.canonical import CanonicalFrame
-from engine.features import (COLOUR_TARGET, FeatureLayout, SpaceVolume, global_features, local_features,
+from engine.features import (COLOUR_TARGET, FeatureLayout, SpaceVolume, global_features, global_scores, local_features,
                              normalise_colours, tent_code, window_features)
 from engine.sliding import axis_positions, non_maximum_suppression, score_windows
 
@@ -182,3 +182,22 @@ def test_layout_colour_mode_round_trips_and_old_models_read_as_raw():
     assert FeatureLayout.from_json(lay.to_json()).colour == "space-median"
     old = {k: v for k, v in lay.to_json().items() if k != "colour"}  # written before the mode existed
     assert FeatureLayout.from_json(old).colour == "none"
+
+
+@pytest.mark.parametrize("shape", [(7, 5, 9), (12, 24, 8), (1, 1, 1)])
+def test_global_scores_are_the_global_block_times_the_weights(shape):
+    rng = np.random.default_rng(sum(shape))
+    grid = mom.VoxelGrid.covering([3.0, 2.4, 2.2], 0.1, 10**6)
+    n = np.asarray(grid.shape)
+    shape = np.minimum(shape, n)
+    pos = [np.unique(np.append(np.arange(0, n[a] - shape[a] + 1, 2), n[a] - shape[a])) for a in range(3)]
+    lay = FeatureLayout(k=2)
+    w = rng.normal(size=(3, lay.n_global))
+    terms, const = global_scores(pos, shape, grid.shape, grid.voxel, w)
+    lo = np.stack(np.meshgrid(*pos, indexing="ij"), axis=-1).reshape(-1, 3)
+    size = np.broadcast_to(shape, lo.shape)
+    want = global_features(lo / n, size / n, size * grid.voxel) @ w.T
+    i, j, k = np.unravel_index(np.arange(len(lo)), [len(p) for p in pos])
+    got = terms[0][:, i] + terms[1][:, j] + terms[2][:, k] + const[:, None]
+    assert np.allclose(got.T, want, rtol=0, atol=1e-12)
+    assert np.ptp(want[:, 0]) > 0.1  # the positions matter
