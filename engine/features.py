@@ -247,20 +247,25 @@ def local_features(sums: np.ndarray, n_window: np.ndarray, k: int, min_points: i
     sub-box's window, for the ratio.  Sub-boxes with fewer than ``min_points``
     points get all zeros; normal and curvature need 3 points.
     """
-    n = sums[..., 0]
+    lead = sums.shape[:-1]
+    sums = sums.reshape(-1, sums.shape[-1])
+    n = sums[:, 0]
     occ = n >= max(min_points, 1)
     safe = np.where(n > 0, n, 1.0)
-    out = np.zeros(sums.shape[:-1] + (LOCAL_SIZE,))
-    out[..., 0] = occ
-    out[..., 1] = np.where(occ, n / np.maximum(n_window, 1.0) * k ** 3, 0.0)
-    out[..., 2:5] = np.where(occ[..., None], sums[..., 10:13] / safe[..., None], 0.0)
+    out = np.zeros((len(sums), LOCAL_SIZE))
+    out[:, 0] = occ
+    out[:, 1] = np.where(occ, n / np.broadcast_to(np.maximum(n_window, 1.0), lead).reshape(-1) * k ** 3, 0.0)
+    out[:, 2:5] = np.where(occ[:, None], sums[:, 10:13] / safe[:, None], 0.0)
     geo = occ & (n >= 3)
-    if geo.any():  # eigen-analysis only where there is a surface to analyse
-        lam, total, vec = mom.smallest_eigen_six(mom.covariance_six(sums[geo]))
+    if geo.all():
+        lam, total, vec = mom.smallest_eigen_columns(*mom.covariance_columns(sums))
+    elif geo.any():  # eigen-analysis only where there is a surface to analyse
+        lam, total, vec = mom.smallest_eigen_columns(*mom.covariance_columns(sums[geo]))
+    if geo.any():
         ok = total > 0
         out[geo, 5:8] = np.where(ok[:, None], np.abs(vec), 0.0)
         out[geo, 8] = np.where(ok, lam / np.where(ok, total, 1.0), 0.0)
-    return out
+    return out.reshape(*lead, LOCAL_SIZE)
 
 
 def window_features(iv: np.ndarray, grid: mom.VoxelGrid, lo: np.ndarray, hi: np.ndarray,

@@ -236,12 +236,31 @@ def _null_vector(xx, xy, xz, yy, yz, zz, lam) -> tuple[np.ndarray, np.ndarray, n
     return v[0] * inv, v[1] * inv, v[2] * inv
 
 
+def covariance_columns(m: np.ndarray) -> list[np.ndarray]:
+    """:func:`covariance_six` of moment sums ``(n, 13)`` as six contiguous columns (the same values)."""
+    n = m[:, 0]
+    safe = np.where(n > 0, n, 1.0)
+    mean = [m[:, 1 + a] / safe for a in range(3)]
+    cols = [m[:, 4 + k] / safe - mean[a] * mean[b] for k, (a, b) in enumerate(_PAIRS)]
+    few = n < 2
+    if few.any():
+        for c in cols:
+            c[few] = 0.0
+    return cols
+
+
 def smallest_eigen_six(six: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`smallest_eigen` of symmetric matrices given by their six entries ``(..., 6)`` (xx xy xz yy yz zz)."""
     six = np.asarray(six, dtype=np.float64)
     lead = six.shape[:-1]
     s = six.reshape(-1, 6)
-    xx, xy, xz, yy, yz, zz = (np.ascontiguousarray(s[:, i]) for i in range(6))
+    lam, total, vec = smallest_eigen_columns(*(np.ascontiguousarray(s[:, i]) for i in range(6)))
+    return lam.reshape(lead), total.reshape(lead), vec.reshape(*lead, 3)
+
+
+def smallest_eigen_columns(xx: np.ndarray, xy: np.ndarray, xz: np.ndarray, yy: np.ndarray, yz: np.ndarray,
+                           zz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`smallest_eigen` of ``n`` symmetric matrices given as six ``(n,)`` columns of their entries."""
     q = (xx + yy + zz) / 3.0
     dx, dy, dz = xx - q, yy - q, zz - q
     p2 = (dx * dx + dy * dy + dz * dz + 2.0 * (xy * xy + xz * xz + yz * yz)) / 6.0
@@ -263,11 +282,11 @@ def smallest_eigen_six(six: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     total = lam + np.maximum(mid, 0.0) + np.maximum(big, 0.0)
     hard = ~((mid - small) > EIGEN_GAP * big)  # also: zero or non-finite matrices
     if hard.any():
-        full = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])
-        w, v = np.linalg.eigh(s[hard][:, full].reshape(-1, 3, 3))
+        h = [c[hard] for c in (xx, xy, xz, xy, yy, yz, xz, yz, zz)]
+        w, v = np.linalg.eigh(np.stack(h, axis=-1).reshape(-1, 3, 3))
         w = np.maximum(w, 0.0)
         lam[hard], total[hard], vec[hard] = w[:, 0], w.sum(axis=1), v[:, :, 0]
-    return lam.reshape(lead), total.reshape(lead), vec.reshape(*lead, 3)
+    return lam, total, vec
 
 
 def smallest_eigen(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
