@@ -15,8 +15,12 @@ into one process; the driver only sums small per-tile results):
    absorption of weak groups;
 5. refinement (:mod:`engine.refine`): every space of at least ``refine_min_area``
    m² is parsed again on its own points, in its own frame(s), one task per
-   space; when that splits it, its pieces replace it (a wing at an angle, a
-   large cell never cut);
+   space, with ridge dividers besides the voids (:mod:`engine.ridges`: walls
+   seen as one dense surface); when that splits it, its pieces replace it (a
+   wing at an angle, a large cell never cut, rooms glued through a wall with
+   no void).  Building faces beside a refined space are cut where the new
+   space beyond changes, and the pieces rejoin neighbours beyond the refined
+   space through open faces (:mod:`engine.rejoin`);
 6. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile
    (a refined space's points located in its new cells) and collecting
    per-space counts, z ranges and tiles.
