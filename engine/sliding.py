@@ -41,7 +41,7 @@ from engine.features import LOCAL_SIZE, FeatureLayout, SpaceVolume, global_score
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000
 #: Sub-box terms (an occupied sub-box in one slot of one window) added in one go.
-TERM_BATCH = 1 << 20
+TERM_BATCH = 1 << 18
 
 
 def window_shape(metric_size: np.ndarray, grid: mom.VoxelGrid) -> np.ndarray:
