@@ -27,8 +27,13 @@ Speed, in the same run on the first test building:
 
 The generated stores are cached in ``$BUILDINGPARSER_BENCH_CACHE`` (as
 :mod:`benchmarks.bench_spaces`'s), so a rerun does not generate them again.
-Full mode takes about 25 minutes on 2 quiet cores (most of it training);
-``--quick``: two small training buildings, one test building, one mining round.
+Full mode: one training (the shipped model's: 39 min of the run at a load
+average of 20-27 on 2 cores; ``make model`` took 19 min at a load of ~13), one
+detection pass for the four models, one space parsing and detection of the
+parsed spaces, and the speed runs; no longer four trainings of six 250 m2
+buildings with 3 mining rounds each (still mining its first round after 20 min).
+``--quick``: two small training buildings, one test building, one mining round
+(165 s).
 """
 from __future__ import annotations
 
