@@ -27,7 +27,7 @@ Speed, in the same run on the first test building:
 
 The generated stores are cached in ``$BUILDINGPARSER_BENCH_CACHE`` (as
 :mod:`benchmarks.bench_spaces`'s), so a rerun does not generate them again.
-Full mode: one training (the shipped model's: 39 min of the run at a load
+Full mode: one training (the shipped model's: 34 min of a 73 min run at a load
 average of 20-27 on 2 cores; ``make model`` took 19 min at a load of ~13), one
 detection pass for the four models, one space parsing and detection of the
 parsed spaces, and the speed runs; no longer four trainings of six 250 m2
