@@ -76,6 +76,7 @@ class TrainSettings:
     max_atoms: int = 10
     max_instances: int = 400
     iou_weight: float = 0.5
+    relative_ratio: float | None = None
     disabled: tuple[str, ...] = ()
     classes: tuple[int, ...] = tuple(range(N_CLASSES))
     max_stride: float = 0.5
@@ -104,7 +105,7 @@ class TrainSettings:
             v = config.get(f"detection.{key}") if f.name in ("k", "voxel", "max_cells") else \
                 config.get(f"detection.train.{key}")
             if v is not None:
-                kw[f.name] = type(f.default)(v)
+                kw[f.name] = float(v) if f.name == "relative_ratio" else type(f.default)(v)
         kw.update(overrides)
         return cls(**kw)
 
@@ -373,7 +374,7 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
     dictionary = WindowDictionary(settings.k, iou_weight=settings.iou_weight,
                                   preference_quantile=settings.preference_quantile,
                                   max_instances=settings.max_instances, max_atoms=settings.max_atoms,
-                                  random_state=settings.seed)
+                                  random_state=settings.seed, relative_ratio=settings.relative_ratio)
     use = np.isin(cls, settings.classes)
     dictionary.fit(cls[use], np.concatenate([r["unit_size"] for r in inst])[use],
                    np.concatenate([r["metric_size"] for r in inst])[use],

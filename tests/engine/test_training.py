@@ -40,3 +40,13 @@ def test_ablation_refit_leaves_out_its_columns(trained, variant):
     assert not np.allclose(abl.weights[:3], model.weights[:3])
     assert abl.svm["ablation"]["disabled"] == list(ABLATIONS[variant])
     assert abl.dictionary is model.dictionary
+
+
+def test_the_dictionary_rule_of_the_shipped_model_is_the_default(trained):
+    """``make model`` must reproduce the shipped model: training keeps its dictionary rule unless configured."""
+    import dask
+
+    _, settings, model, _ = trained
+    assert settings.relative_ratio is None and model.dictionary.relative_ratio is None
+    with dask.config.set({"buildingparser.detection.train.relative-ratio": 0.5}):
+        assert TrainSettings.from_config().relative_ratio == 0.5
