@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from engine.detection import (DetectionSettings, PointIndex, detect_in_volume, prepare_space, space_frame,
-                              to_proposals)
+                              to_proposals, top_windows)
 from engine.features import FeatureLayout, SpaceVolume
 from engine.model import Model
 from engine.proposals import Proposal
@@ -62,13 +62,9 @@ def window_candidates_many(vol: SpaceVolume, models: list[Model],
         scored = score_windows_many(vol, np.array(shape), w, b, full, settings.stride, settings.min_window_points,
                                     settings.max_stride)
         for (mi, ai), ws in zip(members, scored):
-            flat = ws.scores.ravel()
-            ok = np.nonzero(flat > settings.score_threshold)[0]
-            if len(ok) > settings.pre_nms:
-                ok = ok[np.argpartition(-flat[ok], settings.pre_nms - 1)[:settings.pre_nms]]
-            if len(ok):
-                lo, hi = ws.boxes(ok)
-                out[mi][ai] = (lo, hi, flat[ok], np.full(len(ok), ai))
+            top = top_windows(ws, ai, settings)
+            if top is not None:
+                out[mi][ai] = top
     return out
 
 

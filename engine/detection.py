@@ -49,7 +49,7 @@ from engine.features import SpaceVolume, window_features
 from engine.model import Model, load_model
 from engine.proposals import Proposal
 from engine.reveal import refine_reveals
-from engine.sliding import non_maximum_suppression, score_windows_many, window_shape
+from engine.sliding import WindowScores, non_maximum_suppression, score_windows_many, window_shape
 from engine.spacedata import SpacePoints, SpaceRef, index_spaces, load_space
 from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
@@ -274,14 +274,25 @@ def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSetting
                                     np.array([model.bias[c] for c in codes]), model.layout, settings.stride,
                                     settings.min_window_points, settings.max_stride)
         for ai, ws in zip(members, scored):
-            flat = ws.scores.ravel()
-            ok = np.nonzero(flat > settings.score_threshold)[0]
-            if len(ok) > settings.pre_nms:
-                ok = ok[np.argpartition(-flat[ok], settings.pre_nms - 1)[:settings.pre_nms]]
-            if len(ok):
-                lo, hi = ws.boxes(ok)
-                out[ai] = (lo, hi, flat[ok], np.full(len(ok), ai))
+            top = top_windows(ws, ai, settings)
+            if top is not None:
+                out[ai] = top
     return out
+
+
+def top_windows(ws: WindowScores, atom: int, settings: DetectionSettings) -> tuple[np.ndarray, ...] | None:
+    """One window shape's scored positions above ``score-threshold``, at most ``pre-nms`` of the best.
+
+    Returns ``(lo, hi, score, atom index per window)``, or None when no window passes.
+    """
+    flat = ws.scores.ravel()
+    ok = np.nonzero(flat > settings.score_threshold)[0]
+    if len(ok) > settings.pre_nms:
+        ok = ok[np.argpartition(-flat[ok], settings.pre_nms - 1)[:settings.pre_nms]]
+    if not len(ok):
+        return None
+    lo, hi = ws.boxes(ok)
+    return lo, hi, flat[ok], np.full(len(ok), atom)
 
 
 def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings,
