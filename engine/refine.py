@@ -250,6 +250,7 @@ def gather_space(store, tiles: list[str], index: BoxIndex, grid: Grid, cells: np
 def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, floors: np.ndarray,
                 band_z: np.ndarray) -> Part:
     """Recursive slicing and merging of a memory store's points in the frame ``yaw``."""
+    from engine.ceilings import ceiling_dividers, ceiling_occupancy
     from engine.merging import merge, neighbour_edges, ridge_faces, test_edges
     from engine.ridges import Occupancy, space_ridges
     from engine.slicing import slice_storeys
@@ -268,6 +269,9 @@ def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, fl
                                        max_levels=params.max_levels, ridges=ridges, ridge_params=params.ridges)
     edges = neighbour_edges(cells, params.walls.bins(params.min_face))
     test_edges(mem, sub, fl, cells, edges, params.walls, params.merge_window, bz)
+    # a side with a ceiling in the storey and a side without one (a stair shaft) are not one room
+    edges = ceiling_dividers(edges, ceiling_occupancy(bu, bv, bzs, int(bz[0]), params.ceilings, grid.bin_width,
+                                                      grid.z_bin), params.ceilings, grid.bin_width)
     if ridges:
         occ = Occupancy.build(bu, bv, bzs, int(bz[0]), params.ridges.bins(params.ridges.occupancy_pixel, grid.bin_width))
         edges = ridge_faces(edges, ridges, params.ridges, grid.bin_width, occ)

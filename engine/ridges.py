@@ -292,36 +292,61 @@ class Occupancy:
     pixel: int
 
     @classmethod
-    def build(cls, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray, band_z: int, pixel: int) -> "Occupancy":
-        """From points' bins; ``band_z``: the first z bin of the upper band; ``pixel`` in bins."""
-        up = np.asarray(bz) >= band_z
+    def build(cls, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray, band_z: int, pixel: int,
+              max_span: int | None = None) -> "Occupancy":
+        """From points' bins; ``band_z``: the first z bin of the upper band; ``pixel`` in bins.
+
+        With ``max_span`` (z bins) a pixel counts only where its upper-band
+        points span at most that many z bins: a horizontal surface (the
+        ceiling), not a wall running down the band (:mod:`engine.ceilings`).
+        """
+        z = np.asarray(bz)
+        up = z >= band_z
         if not up.any():
             return cls(np.zeros((0, 0), bool), 0, 0, pixel)
         pu, pv = np.asarray(bu)[up] // pixel, np.asarray(bv)[up] // pixel
         u0, v0 = int(pu.min()), int(pv.min())
-        img = np.zeros((int(pu.max()) - u0 + 1, int(pv.max()) - v0 + 1), dtype=bool)
-        img[pu - u0, pv - v0] = True
+        shape = (int(pu.max()) - u0 + 1, int(pv.max()) - v0 + 1)
+        img = np.zeros(shape, dtype=bool)
+        if max_span is None:
+            img[pu - u0, pv - v0] = True
+        else:
+            key = (pu - u0) * shape[1] + (pv - v0)
+            zu = z[up]
+            order = np.lexsort((zu, key))
+            ks, zs = key[order], zu[order]
+            first = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+            last = np.r_[first[1:], len(ks)] - 1
+            flat = img.reshape(-1)
+            flat[ks[first]] = (zs[last] - zs[first]) <= max_span
         return cls(img, u0 * pixel, v0 * pixel, pixel)
 
-    def side_fraction(self, axis: int, position: int, a: int, b: int, depth: int) -> tuple[float, float]:
-        """Fraction of the stretch ``[a, b)`` of a face (normal to ``axis`` at bin ``position``) with the ceiling
-        scanned within ``depth`` bins on each side (below, above)."""
+    def side_profiles(self, axis: int, position: int, a: int, b: int, depth: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per pixel along the stretch ``[a, b)`` of a face (normal to ``axis`` at bin ``position``): whether a
+        scanned pixel lies within ``depth`` bins of the face on each side (below, above)."""
         if self.scanned.size == 0 or b <= a:
-            return 0.0, 0.0
+            return np.zeros(0, bool), np.zeros(0, bool)
         img = self.scanned if axis == 0 else self.scanned.T
         n0, o0 = (self.u0, self.v0) if axis == 0 else (self.v0, self.u0)
         px = self.pixel
         ka, kb = (a - o0) // px, -(-(b - o0) // px)
         out = []
         for lo, hi in ((position - depth, position), (position, position + depth)):
+            prof = np.zeros(max(kb - ka, 1), dtype=bool)
             ia, ib = max((lo - n0) // px, 0), min(-(-(hi - n0) // px), img.shape[0])
             ja, jb = max(ka, 0), min(kb, img.shape[1])
-            if ib <= ia or jb <= ja:
-                out.append(0.0)
-                continue
-            seen = img[ia:ib, ja:jb].any(axis=0).sum()
-            out.append(float(seen) / max(kb - ka, 1))
+            if ib > ia and jb > ja:
+                prof[ja - ka:jb - ka] = img[ia:ib, ja:jb].any(axis=0)
+            out.append(prof)
         return out[0], out[1]
+
+    def side_fraction(self, axis: int, position: int, a: int, b: int, depth: int) -> tuple[float, float]:
+        """Fraction of the stretch ``[a, b)`` of a face (normal to ``axis`` at bin ``position``) with the ceiling
+        scanned within ``depth`` bins on each side (below, above)."""
+        below, above = self.side_profiles(axis, position, a, b, depth)
+        if not len(below):
+            return 0.0, 0.0
+        return float(below.mean()), float(above.mean())
 
 
 def face_pieces(ridges: list[RidgeLine], axis: int, position: int, overlap: tuple[int, int], p: RidgeParams,

@@ -20,7 +20,9 @@ into one process; the driver only sums small per-tile results):
    wing at an angle, a large cell never cut, rooms glued through a wall with
    no void).  Building faces beside a refined space are cut where the new
    space beyond changes, and the pieces rejoin neighbours beyond the refined
-   space through open faces (:mod:`engine.rejoin`);
+   space through open faces (:mod:`engine.rejoin`).  A face between a side
+   with a ceiling in the storey and a side without one (a stair shaft beside
+   its lobby) is divided there too (:mod:`engine.ceilings`);
 6. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile
    (a refined space's points located in its new cells) and collecting
    per-space counts, z ranges and tiles.
@@ -46,6 +48,7 @@ rely on::
                  "neighbours": [{"space", "faces": [{"axis", "position", "extent": [a, b], "z_range",
                                  "segment": [[x0, y0], [x1, y1]] (world), "divider": bool,
                                  "divider_kind", "score", "yaw"}]}]}],  # yaw: as the cells'
+                 # divider_kind: a divider's kind, or "ridge" / "ceiling" (engine.ridges, engine.ceilings)
                  # a refined space's footprint is its new cells' union clipped to the space it came from
      "unassigned_points", "point_count",
      "stats": {"passes": [{"pass", "searched", "dividers", "boxes", "tiles"}], "cells", "edges",
@@ -75,6 +78,7 @@ import numpy as np
 
 from engine import config  # noqa: F401  (registers the defaults)
 from engine.alignment import AlignmentParams, Frame, estimate_alignment, tile_evidence
+from engine.ceilings import CeilingParams
 from engine.dividers import DividerParams, vertical_params
 from engine.histograms import BoxIndex, Grid, share, tile_extents, tiles_by_size, tiles_touching, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
@@ -141,6 +145,9 @@ class SpaceParams:
     #: Refined pieces join their neighbours beyond the refined space through open faces
     #: (:mod:`engine.rejoin`).
     rejoin: bool = True
+    #: In the refinement, a face without a divider between a side with a ceiling in the storey and a side
+    #: without one (a stair shaft beside its lobby) is divided: :mod:`engine.ceilings`.
+    ceilings: CeilingParams = field(default_factory=CeilingParams)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "walls", dataclasses.replace(self.walls, bin_width=self.bin_width))
@@ -178,6 +185,8 @@ class SpaceParams:
             kw["alignment"] = AlignmentParams.from_dict(c["alignment"])
         if c.get("ridges"):
             kw["ridges"] = RidgeParams.from_dict(c["ridges"])
+        if c.get("ceilings"):
+            kw["ceilings"] = CeilingParams.from_dict(c["ceilings"])
         kw.update(overrides)
         return cls(**kw)
 
@@ -186,6 +195,7 @@ class SpaceParams:
         d["walls"], d["slabs"] = self.walls.to_dict(), self.slabs.to_dict()
         d["alignment"] = self.alignment.to_dict()
         d["ridges"] = self.ridges.to_dict()
+        d["ceilings"] = self.ceilings.to_dict()
         return d
 
 

@@ -1,0 +1,94 @@
+"""Ceiling dividers: a face between a part of a storey with a ceiling and a part without one (a stair shaft)."""
+from __future__ import annotations
+
+import numpy as np
+
+from engine.ceilings import CeilingParams, ceiling_dividers, ceiling_occupancy
+from engine.merging import Edge
+from engine.ridges import Occupancy
+
+BW, ZB = 0.01, 0.02
+BAND = int(round(2.2 / ZB))  # upper band from 2.2 m (floor at z 0)
+P = CeilingParams()
+
+
+def _bins(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return (np.floor(pts[:, 0] / BW).astype(np.int64), np.floor(pts[:, 1] / BW).astype(np.int64),
+            np.floor(pts[:, 2] / ZB).astype(np.int64))
+
+
+def _surface(rng, n, u, v, z) -> np.ndarray:
+    """``n`` points uniform in the box ``u x v x z`` (pairs of bounds)."""
+    return np.stack([rng.uniform(*u, n), rng.uniform(*v, n), rng.uniform(*z, n)], axis=1)
+
+
+def _lobby_and_shaft(rng, per_m2: float = 250.0) -> np.ndarray:
+    """A lobby (u 0-8 m, v 0-6 m, ceiling at 3.0 m) beside a stair shaft (u 8-12 m) whose ceiling lies in the next
+    storey: in this storey the shaft shows its walls up to the storey's top (4.0 m) and a flight in its far half,
+    no horizontal surface above its landing.  The wall between them at u 8 m is seen from both sides."""
+    pts = [_surface(rng, int(per_m2 * 48), (0, 8), (0, 6), (0, 0)),        # floors
+           _surface(rng, int(per_m2 * 24), (8, 12), (0, 6), (0, 0)),
+           _surface(rng, int(per_m2 * 48), (0, 8), (0, 6), (3.0, 3.0)),    # the lobby's ceiling
+           _surface(rng, int(per_m2 * 6 * 3.0), (7.98, 7.985), (0, 6), (0, 3.0)),   # the wall, lobby side
+           _surface(rng, int(per_m2 * 6 * 4.0), (8.015, 8.02), (0, 6), (0, 4.0)),   # the wall, shaft side
+           _surface(rng, int(per_m2 * 6 * 4.0), (11.995, 12.0), (0, 6), (0, 4.0)),  # the shaft's far wall
+           _surface(rng, int(per_m2 * 4 * 1.4), (10.5, 12), (3, 6), (2.6, 2.6))]   # a landing of the flight
+    return np.concatenate(pts)
+
+
+def test_the_ceiling_raster_keeps_horizontal_surfaces_and_not_walls():
+    rng = np.random.default_rng(0)
+    bu, bv, bz = _bins(_lobby_and_shaft(rng))
+    occ = ceiling_occupancy(bu, bv, bz, BAND, P, BW, ZB)
+    depth = int(round(0.5 / BW))
+    # the lobby side of the wall reads ceiling all along; the shaft side (its landing) reads none: the shaft's
+    # wall runs down the upper band (it is in the plain upper-band raster, which cannot tell)
+    below, above = occ.side_fraction(0, 800, 0, 600, depth)
+    assert below > 0.9 and above == 0.0
+    plain = Occupancy.build(bu, bv, bz, BAND, occ.pixel)
+    assert min(plain.side_fraction(0, 800, 0, 600, depth)) > 0.9
+    # a horizontal landing of the flight is a horizontal surface: it reads as ceiling where it is
+    assert occ.side_fraction(0, 1100, 300, 600, depth)[1] > 0.9
+
+
+def test_a_face_between_a_ceiling_and_no_ceiling_is_divided():
+    rng = np.random.default_rng(1)
+    bu, bv, bz = _bins(_lobby_and_shaft(rng))
+    occ = ceiling_occupancy(bu, bv, bz, BAND, P, BW, ZB)
+    shaft = Edge(0, 1, 0, 0, 800, (0, 600))
+    room = Edge(2, 3, 0, 0, 400, (0, 600))  # inside the lobby: ceiling on both sides
+    well = Edge(4, 5, 0, 0, 1000, (0, 300))  # inside the shaft: no ceiling on either side
+    walled = Edge(0, 1, 0, 0, 800, (0, 600), divider={"kind": "peak-gap-peak"})
+    got = ceiling_dividers([shaft, room, well, walled], occ, P, BW)
+    assert got[0].divider is not None and got[0].divider["kind"] == "ceiling"
+    assert got[1] is room and got[2] is well and got[3] is walled
+    # span 0 switches it off
+    off = ceiling_dividers([shaft], occ, CeilingParams(span=0.0), BW)
+    assert off[0].divider is None
+
+
+def test_a_face_whose_two_sides_end_at_the_same_place_is_not_divided():
+    # a face that runs beyond the building (cells stretched by flying points): along its first half both sides
+    # have a ceiling, along the second neither.  Each side has a ceiling along half of it, but the ceiling does
+    # not stop AT the face: no divider (a rule on the two sides' fractions alone would be on a knife edge here)
+    img = np.zeros((100, 100), dtype=bool)
+    img[:, :50] = True
+    occ = Occupancy(img, 0, 0, 10)
+    e = Edge(0, 1, 0, 0, 500, (0, 1000))
+    assert occ.side_fraction(0, 500, 0, 1000, 50) == (0.5, 0.5)
+    assert ceiling_dividers([e], occ, P, BW)[0].divider is None
+    # the same face with the ceiling on one side only is divided
+    img2 = img.copy()
+    img2[50:, :] = False
+    assert ceiling_dividers([e], Occupancy(img2, 0, 0, 10), P, BW)[0].divider["kind"] == "ceiling"
+
+
+def test_occupancy_side_profiles_match_side_fraction():
+    img = np.zeros((20, 10), dtype=bool)
+    img[3, 2:6] = True   # below a face at u bin 50 (pixel 10 bins): within 30 bins
+    img[7, 4:10] = True  # above it
+    occ = Occupancy(img, 0, 0, 10)
+    below, above = occ.side_profiles(0, 50, 0, 100, 30)
+    assert below.tolist() == [False, False, True, True, True, True, False, False, False, False]
+    assert above.tolist() == [False] * 4 + [True] * 6
+    assert occ.side_fraction(0, 50, 0, 100, 30) == (0.4, 0.6)
