@@ -1,4 +1,4 @@
-"""Ceiling dividers: a face between a part of a storey with a ceiling and a part without one (issue 8).
+"""Ceiling dividers: where a ceiling stops, or changes height, there is a wall (issue 8: hard buildings).
 
 A room is closed above by its ceiling, a horizontal surface inside its
 storey.  Some spaces have none there: a **stair tower** is a shaft through the
@@ -30,22 +30,48 @@ wall, a shaft's wall beside its landing: 0.3 m and more, from door height to
 the ceiling).  A side has a ceiling along a stretch of the face where such a
 pixel lies within ``side`` metres of it, and along the face where it has one
 along at least ``min_scanned`` of it.
+
+**Step lines.**  A room has one ceiling, and neighbouring rooms often have
+different ones (a hallway lowered for ducts, a higher lobby or conference
+room).  A line along which the ceiling changes height is a wall even where
+its points show no void and no ridge: a glazed partition returns few points
+(no ridge) and has no void between two faces, but the two rooms' ceilings
+still meet at it at two heights.  :func:`step_lines` finds such lines on the
+same raster (each ceiling pixel's height: the top of its points), the way
+ridge lines are found (:mod:`engine.ridges`): in every ``chunk`` along an
+axis, a pixel boundary is a step where the ``level_window`` metres on each
+side are each covered by ceiling (``min_scanned``) *at one height* (their
+spread between the 10 % and 90 % quantiles is below ``step``) and the two
+heights differ by at least ``step``; steps are followed from chunk to chunk
+and a line runs ``min_run`` metres at least.  A beam or a light panel under
+the ceiling is no step: beside it a window holds the ceiling too (or the
+beam's shadow on the ceiling, which is not scanned), so it is not at one
+height; ``level_window`` (1 m, the room level's reach in the void test) is
+wider than a beam and its shadow.  ``step`` (0.1 m) is well above the height
+noise of a scanned ceiling (scan noise and registration offsets of a few cm;
+a light panel's few cm).  The refinement adds the step lines to the ridge
+lines: slicing cuts at them, and merging divides the stretch of a face they
+cover.  What it cannot tell: a bulkhead or soffit at least ``level_window``
+wide along a room's whole length would split the room (none of the generated
+buildings lost by it).
 """
 from __future__ import annotations
 
 import dataclasses
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from engine.merging import Edge
-from engine.ridges import Occupancy
+from engine.ridges import Occupancy, RidgeLine, RidgeParams, _lines
 
 
 @dataclass(frozen=True)
 class CeilingParams:
-    """The ceiling test of faces in the refinement (metres, fractions); see the module docstring."""
+    """The ceiling tests of the refinement: faces to a side without a ceiling, step lines (metres, fractions)."""
 
     #: Points of one pixel within this height of each other are a horizontal surface (0: no ceiling dividers).
     span: float = 0.1
@@ -55,6 +81,12 @@ class CeilingParams:
     side: float = 0.5
     #: A side has a ceiling along a face when it has one along at least this fraction of the face.
     min_scanned: float = 0.5
+    #: Two sides with a ceiling whose top levels differ by at least this much are under two ceilings (0: off).
+    step: float = 0.1
+    #: Each side of a step lies at one height over ``level_window`` m: the spread between the ``1 - level_quantile``
+    #: and ``level_quantile`` quantiles of its ceiling pixels' heights is below ``step``.
+    level_quantile: float = 0.9
+    level_window: float = 1.0
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -93,4 +125,69 @@ def ceiling_dividers(edges: list[Edge], ceiling: Occupancy, p: CeilingParams, bi
                 e = dataclasses.replace(e, divider={"kind": "ceiling", "position": e.position * bin_width,
                                                     "width": 0.0, "score": 0.0})
         out.append(e)
+    return out
+
+
+def _window_levels(h: np.ndarray, s: int, c: int, q: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every pixel boundary ``i`` (0..n) along axis 0 and chunk ``k`` of ``c`` pixels along axis 1, over the
+    ``s`` pixels before ``i`` in the chunk: the median ceiling height, its spread (the ``q`` quantile less the
+    ``1 - q`` quantile) and the fraction of the window with a ceiling.
+
+    ``h``: heights, -1 where no ceiling.  Returns three arrays of shape ``(n + 1, chunks)``; level and spread
+    are NaN where the window holds no ceiling.
+    """
+    n, m = h.shape
+    k = -(-m // c)
+    hp = np.full((n + s, k * c), np.nan)
+    hp[s:, :m] = np.where(h >= 0, h, np.nan)
+    # the window ending at boundary i: rows i - s .. i - 1 of h, i.e. rows i .. i + s - 1 of hp
+    win = np.lib.stride_tricks.sliding_window_view(hp, s, axis=0)[: n + 1]  # (n + 1, k * c, s)
+    win = win.reshape(n + 1, k, c * s)
+    cover = np.mean(~np.isnan(win), axis=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows: NaN
+        lo, mid, hi = np.nanquantile(win, [1.0 - q, 0.5, q], axis=2)
+    return mid, hi - lo, cover
+
+
+def step_lines(ceiling: Occupancy, p: CeilingParams, ridge_params: RidgeParams, bin_width: float, z_bin: float,
+               ridges: Sequence[RidgeLine] = ()) -> list[RidgeLine]:
+    """Lines along which the ceiling changes height (:class:`engine.ridges.RidgeLine`, in bins of ``bin_width``).
+
+    In every ``ridge_params.chunk`` stretch along each axis, a pixel boundary is a step where the
+    ``level_window`` metres of ceiling before it and after it are each covered over at least ``min_scanned``,
+    each lie at one height (the spread between their ``1 - level_quantile`` and ``level_quantile`` quantiles is
+    below ``step``: one ceiling, not a window that straddles the step, and not a beam with the ceiling beside
+    it or its shadow), and their median heights differ by at least ``step`` metres.  Steps are followed from
+    chunk to chunk like ridges (:func:`engine.ridges._lines`: a line runs ``min_run`` m at least, within one
+    pixel); a line within ``min_spacing`` of a ridge line over the same stretch is that wall and is left out.
+    """
+    if p.step <= 0 or p.span <= 0 or ceiling.height is None or ceiling.scanned.size == 0:
+        return []
+    px = ceiling.pixel
+    pm = px * bin_width
+    s = max(1, int(round(p.level_window / pm)))
+    c = max(1, int(round(ridge_params.chunk / pm)))
+    rp = dataclasses.replace(ridge_params, drift=pm, width=pm)
+    need = p.step / z_bin
+    sp = int(round(ridge_params.min_spacing / bin_width))
+    out: list[RidgeLine] = []
+    for axis in (0, 1):
+        h = ceiling.height if axis == 0 else ceiling.height.T
+        n0, a0 = (ceiling.u0, ceiling.v0) if axis == 0 else (ceiling.v0, ceiling.u0)
+        before, spread_b, cov_b = _window_levels(h, s, c, p.level_quantile)
+        after, spread_a, cov_a = (x[::-1] for x in _window_levels(h[::-1], s, c, p.level_quantile))
+        # (reversed: the s pixels from boundary i on)
+        with np.errstate(invalid="ignore"):
+            diff = np.abs(before - after)
+            mask = ((cov_b >= p.min_scanned) & (cov_a >= p.min_scanned) & (diff >= need)
+                    & (spread_b < need) & (spread_a < need))
+        for r in _lines(mask, np.nan_to_num(diff), axis, 0, 0, 1, rp, pm):
+            line = RidgeLine(axis, n0 + r.cut * px, tuple((a0 + a * c * px, a0 + b * c * px) for a, b in r.runs),
+                             r.strength, n0 + (r.lo if r.lo is not None else r.cut) * px,
+                             n0 + (r.hi if r.hi is not None else r.cut) * px)
+            if any(q.axis == axis and abs(q.cut - line.cut) < sp
+                   and any(q.covered(a, b) for a, b in line.runs) for q in ridges):
+                continue
+            out.append(line)
     return out

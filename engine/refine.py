@@ -250,7 +250,7 @@ def gather_space(store, tiles: list[str], index: BoxIndex, grid: Grid, cells: np
 def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, floors: np.ndarray,
                 band_z: np.ndarray) -> Part:
     """Recursive slicing and merging of a memory store's points in the frame ``yaw``."""
-    from engine.ceilings import ceiling_dividers, ceiling_occupancy
+    from engine.ceilings import ceiling_dividers, ceiling_occupancy, step_lines
     from engine.merging import merge, neighbour_edges, ridge_faces, test_edges
     from engine.ridges import Occupancy, space_ridges
     from engine.slicing import slice_storeys
@@ -265,13 +265,15 @@ def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, fl
     start = [Box(0, int(bu.min()), int(bu.max()) + 1, int(bv.min()), int(bv.max()) + 1)]
     # walls seen as one dense surface (no void): ridge lines over the space's upper band (engine.ridges)
     ridges = space_ridges(bu, bv, bzs, int(bz[0]), grid.z_bin, params.ridges, grid.bin_width)
+    # a ceiling that changes height is a wall too (engine.ceilings): its step lines cut and divide like ridges
+    ceiling = ceiling_occupancy(bu, bv, bzs, int(bz[0]), params.ceilings, grid.bin_width, grid.z_bin)
+    ridges = ridges + step_lines(ceiling, params.ceilings, params.ridges, grid.bin_width, grid.z_bin, ridges)
     cells, dividers, _ = slice_storeys(mem, sub, [tuple(fl[0])], start, params.slicing_walls, bz,
                                        max_levels=params.max_levels, ridges=ridges, ridge_params=params.ridges)
     edges = neighbour_edges(cells, params.walls.bins(params.min_face))
     test_edges(mem, sub, fl, cells, edges, params.walls, params.merge_window, bz)
     # a side with a ceiling in the storey and a side without one (a stair shaft) are not one room
-    edges = ceiling_dividers(edges, ceiling_occupancy(bu, bv, bzs, int(bz[0]), params.ceilings, grid.bin_width,
-                                                      grid.z_bin), params.ceilings, grid.bin_width)
+    edges = ceiling_dividers(edges, ceiling, params.ceilings, grid.bin_width)
     if ridges:
         occ = Occupancy.build(bu, bv, bzs, int(bz[0]), params.ridges.bins(params.ridges.occupancy_pixel, grid.bin_width))
         edges = ridge_faces(edges, ridges, params.ridges, grid.bin_width, occ)

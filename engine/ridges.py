@@ -290,6 +290,8 @@ class Occupancy:
     u0: int
     v0: int
     pixel: int
+    #: With ``max_span``: the top z bin of each scanned pixel's upper-band points (the ceiling's height), else None.
+    height: np.ndarray | None = None
 
     @classmethod
     def build(cls, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray, band_z: int, pixel: int,
@@ -319,6 +321,10 @@ class Occupancy:
             last = np.r_[first[1:], len(ks)] - 1
             flat = img.reshape(-1)
             flat[ks[first]] = (zs[last] - zs[first]) <= max_span
+            top = np.full(img.size, -1, dtype=np.int64)
+            top[ks[first]] = zs[last]
+            top[~flat] = -1
+            return cls(img, u0 * pixel, v0 * pixel, pixel, top.reshape(shape))
         return cls(img, u0 * pixel, v0 * pixel, pixel)
 
     def side_profiles(self, axis: int, position: int, a: int, b: int, depth: int) -> tuple[np.ndarray, np.ndarray]:

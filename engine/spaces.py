@@ -22,7 +22,8 @@ into one process; the driver only sums small per-tile results):
    space beyond changes, and the pieces rejoin neighbours beyond the refined
    space through open faces (:mod:`engine.rejoin`).  A face between a side
    with a ceiling in the storey and a side without one (a stair shaft beside
-   its lobby) is divided there too (:mod:`engine.ceilings`);
+   its lobby) is divided there too, and lines where the ceiling changes
+   height (a glazed partition) cut and divide like ridges (:mod:`engine.ceilings`);
 6. one pass writing ``cell_id`` and ``space_id`` (int32, -1 none) in every tile
    (a refined space's points located in its new cells) and collecting
    per-space counts, z ranges and tiles.
@@ -146,7 +147,8 @@ class SpaceParams:
     #: (:mod:`engine.rejoin`).
     rejoin: bool = True
     #: In the refinement, a face without a divider between a side with a ceiling in the storey and a side
-    #: without one (a stair shaft beside its lobby) is divided: :mod:`engine.ceilings`.
+    #: without one (a stair shaft beside its lobby) is divided, and lines where the ceiling changes height cut
+    #: and divide like ridge lines: :mod:`engine.ceilings`.
     ceilings: CeilingParams = field(default_factory=CeilingParams)
 
     def __post_init__(self) -> None:

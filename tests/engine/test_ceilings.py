@@ -92,3 +92,81 @@ def test_occupancy_side_profiles_match_side_fraction():
     assert below.tolist() == [False, False, True, True, True, True, False, False, False, False]
     assert above.tolist() == [False] * 4 + [True] * 6
     assert occ.side_fraction(0, 50, 0, 100, 30) == (0.4, 0.6)
+
+
+def _two_ceilings(rng, low: float = 3.0, high: float = 3.4, per_m2: float = 250.0, glass: bool = True) -> np.ndarray:
+    """Two rooms side by side (u 0-5 m and 5-10 m, v 0-6 m) under ceilings at ``low`` and ``high`` m, parted at
+    u 5 m by a glass partition (sparse: 6 % of the density, no void, no ridge) and closed by exterior walls."""
+    pts = [_surface(rng, int(per_m2 * 60), (0, 10), (0, 6), (0, 0)),
+           _surface(rng, int(per_m2 * 30), (0, 5), (0, 6), (low, low)),
+           _surface(rng, int(per_m2 * 30), (5, 10), (0, 6), (high, high))]
+    for u, top in ((0.0, low), (9.995, high)):
+        pts.append(_surface(rng, int(per_m2 * 6 * top), (u, u + 0.005), (0, 6), (0, top)))
+    for v in (0.0, 5.995):
+        pts.append(_surface(rng, int(per_m2 * 5 * low), (0, 5), (v, v + 0.005), (0, low)))
+        pts.append(_surface(rng, int(per_m2 * 5 * high), (5, 10), (v, v + 0.005), (0, high)))
+    if glass:
+        pts.append(_surface(rng, int(0.06 * per_m2 * 6 * high * 2), (4.96, 5.04), (0, 6), (0, high)))
+    pts.append(_surface(rng, int(per_m2 * 6 * (high - low)), (4.995, 5.0), (0, 6), (low, high)))  # the step's face
+    return np.concatenate(pts)
+
+
+def _steps(pts: np.ndarray, p: CeilingParams = P):
+    from engine.ceilings import step_lines
+    from engine.ridges import RidgeParams
+
+    bu, bv, bz = _bins(pts)
+    return step_lines(ceiling_occupancy(bu, bv, bz, BAND, p, BW, ZB), p, RidgeParams(), BW, ZB)
+
+
+def test_a_line_where_the_ceiling_changes_height_is_a_step_line():
+    rng = np.random.default_rng(3)
+    lines = _steps(_two_ceilings(rng))
+    assert len(lines) == 1
+    r = lines[0]
+    assert r.axis == 0 and abs(r.cut * BW - 5.0) <= 0.1
+    assert r.covered(0, 600) >= 500  # along (nearly) the whole 6 m
+    # one ceiling height: no step line (noise and a 5 cm difference are not a step)
+    assert _steps(_two_ceilings(rng, 3.0, 3.05)) == []
+    # step 0: off
+    assert _steps(_two_ceilings(rng), CeilingParams(step=0.0)) == []
+
+
+def test_a_beam_and_its_shadow_are_no_step():
+    # a beam (0.3 m wide, 0.4 m deep) across a room under one ceiling at 3.0 m; the ceiling 0.4 m beyond the beam
+    # on one side lies in its shadow (not scanned).  Beside the beam's edge one side shows the beam's underside
+    # 0.4 m below the ceiling, but not over a whole window at one height: the beam with the ceiling beyond it
+    rng = np.random.default_rng(4)
+    pts = [_surface(rng, 250 * 60, (0, 10), (0, 6), (0, 0)),
+           _surface(rng, 250 * 28, (0, 4.7), (0, 6), (3.0, 3.0)),
+           _surface(rng, 250 * 29, (5.4, 10), (0, 6), (3.0, 3.0)),      # shadow: 5.0-5.4 m unscanned
+           _surface(rng, 250 * 2, (4.7, 5.0), (0, 6), (2.6, 2.6)),      # the beam's underside
+           _surface(rng, 250 * 3, (4.7, 4.705), (0, 6), (2.6, 3.0)),    # its sides
+           _surface(rng, 250 * 3, (4.995, 5.0), (0, 6), (2.6, 3.0))]
+    pts = np.concatenate(pts)
+    assert _steps(pts) == []
+    assert _steps(pts, CeilingParams(level_window=0.5)) == []
+    # the same beam 1.2 m wide (a lowered ceiling over a whole window) is a step
+    wide = np.concatenate([pts, _surface(rng, 250 * 6, (3.8, 4.7), (0, 6), (2.6, 2.6))])
+    wide = wide[~((wide[:, 0] >= 3.8) & (wide[:, 0] < 4.7) & (wide[:, 2] > 2.9))]
+    assert _steps(wide) != []
+
+
+def test_rooms_under_two_ceilings_parted_by_glass_are_two_spaces_in_the_refinement():
+    from engine.alignment import Frame
+    from engine.histograms import Grid
+    from engine.refine import MemoryStore, _parse_part
+    from engine.spaces import SpaceParams
+
+    rng = np.random.default_rng(5)
+    pts = _two_ceilings(rng)
+    raw = {a: np.round(pts[:, i] / 0.001).astype(np.int64) for i, a in enumerate("xyz")}
+    mem = MemoryStore(raw, (0.001,) * 3, (0.0,) * 3, (0.0, 0.0, 0.0))
+    spaces = []
+    for step in (0.1, 0.0):
+        p = SpaceParams(ceilings=CeilingParams(step=step))
+        grid = Grid.for_store(mem, Frame(0.0, (0.0, 0.0, 0.0)), p.bin_width, p.z_bin)
+        part = _parse_part(mem, 0.0, grid, p, 0, np.array([[-1, int(4.0 / ZB)]]), np.array([BAND]))
+        spaces.append(part.n_spaces)
+    # the glass leaves no void and no ridge: without the step line the two rooms are one space
+    assert spaces == [2, 1]
