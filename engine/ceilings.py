@@ -51,9 +51,40 @@ wider than a beam and its shadow.  ``step`` (0.1 m) is well above the height
 noise of a scanned ceiling (scan noise and registration offsets of a few cm;
 a light panel's few cm).  The refinement adds the step lines to the ridge
 lines: slicing cuts at them, and merging divides the stretch of a face they
-cover.  What it cannot tell: a bulkhead or soffit at least ``level_window``
-wide along a room's whole length would split the room (none of the generated
-buildings lost by it).
+cover.
+
+**A partition under the step.**  A ceiling also changes height where no wall
+stands: the free edge of a soffit or bulkhead along one side of an open-plan
+office or a lobby, a dropped ceiling over a reception area.  Seen from above
+such an edge is a step like any other; what tells it from a partition is
+below it.  A partition stands from the floor to the ceiling: glass returns
+few points, but some, and its mullions and rails, a door leaf or the glass or
+transom over a door return points at normal density, so nearly every
+stretch of the line holds some.  Under a soffit's edge there is open air:
+only the furniture that happens to stand there.  So a run of a step line
+divides only where at least ``min_partition`` (0.5: most) of its
+``ridges.chunk`` stretches hold a point within ``partition_tolerance`` (0.1
+m: the step is located to a pixel of the raster, and a partition's faces lie
+half its thickness from its middle) of the line's position in that stretch,
+between the *floor band* (``floor_band`` over the storey's floor: the floor,
+skirtings, floor tracks) and the *ceiling band* (``ceiling_band`` under the
+lower of the two ceilings: head tracks, trims, light fittings and the
+soffit's own face), which hold points under a soffit's edge too
+(:func:`partition_support`).  A stretch holds the partition only with a point
+in *each half* of that band (``both_halves``): a partition stands at all
+heights, while desks, chairs, counters and low cabinets, which may well stand
+under a soffit's edge, stay in the lower half (one band alone let three desks
+across a 6 m soffit edge make it a wall), and pendant lights or signs hang in
+the upper half only.  An open doorway in a partition holds nothing in the
+lower half for a stretch or two: ``min_partition`` 0.5 leaves room for doors
+(0.9 lost a glazed partition with an open door on a hard building).  The
+run's two end stretches are left out: the walls it meets stand there under a
+soffit's edge too.  What it
+still cannot tell: tall furniture (shelves, tall cabinets) standing under a
+soffit's edge along most of its length makes it a wall; a partition whose
+glass returns (almost) nothing, with mullions about 1 m apart or more and
+no door, may not be one (the two rooms then stay one space, as before the step
+lines).
 """
 from __future__ import annotations
 
@@ -86,6 +117,18 @@ class CeilingParams:
     #: and ``level_quantile`` quantiles of its ceiling pixels' heights is below ``step``.
     level_quantile: float = 0.9
     level_window: float = 1.0
+    #: A step line divides only where at least this fraction of its ``ridges.chunk`` stretches hold a point
+    #: within ``partition_tolerance`` of it between the floor band and the ceiling band: the partition under a
+    #: step, which a soffit's free edge lacks (0: no test).
+    min_partition: float = 0.5
+    partition_tolerance: float = 0.1
+    #: The floor band (above the storey's floor) and the ceiling band (below the lower ceiling of the step) left
+    #: out of that test: floor, skirting, tracks, trims and fittings lie in them under a soffit's edge too.
+    floor_band: float = 0.2
+    ceiling_band: float = 0.2
+    #: A stretch holds the partition only with a point in each half of that band (a partition stands at all
+    #: heights; desks, chairs, counters and low cabinets stay in the lower half).
+    both_halves: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -94,7 +137,8 @@ class CeilingParams:
     def from_dict(cls, d: dict[str, Any]) -> "CeilingParams":
         known = {f.name for f in dataclasses.fields(cls)}
         d = {k.replace("-", "_"): v for k, v in d.items()}
-        return cls(**{k: float(v) for k, v in d.items() if k in known})
+        types = {f.name: f.type for f in dataclasses.fields(cls)}
+        return cls(**{k: (bool(v) if types[k] in ("bool", bool) else float(v)) for k, v in d.items() if k in known})
 
 
 def ceiling_occupancy(bu, bv, bz, band_z: int, p: CeilingParams, bin_width: float, z_bin: float) -> Occupancy:
@@ -160,9 +204,29 @@ def _window_levels(h: np.ndarray, s: int, c: int, q: float) -> tuple[np.ndarray,
     return quantile(0.5), quantile(q) - quantile(1.0 - q), cover
 
 
+def partition_support(normal: np.ndarray, along: np.ndarray, start: int, chunk: int, centre: np.ndarray,
+                      tolerance: int) -> np.ndarray:
+    """Per ``chunk``-bin stretch ``k`` along a line (from bin ``start``): whether a point lies within ``tolerance``
+    bins of ``centre[k]``, the line's position in that stretch.
+
+    ``normal``, ``along``: the bins of the points across and along the line (the caller keeps only those
+    between the floor band and the ceiling band).  A partition under a step (glass, its mullions and rails, a
+    door leaf or the transom over a door) returns points in nearly every stretch; the free edge of a soffit
+    has open air under it, and only furniture that happens to stand there.
+    """
+    n = len(centre)
+    k = (np.asarray(along) - start) // chunk
+    inside = (k >= 0) & (k < n)
+    k = k[inside]
+    near = np.abs(np.asarray(normal)[inside] - centre[k]) <= tolerance
+    return np.bincount(k[near], minlength=n)[:n] > 0
+
+
 def step_lines(ceiling: Occupancy, p: CeilingParams, ridge_params: RidgeParams, bin_width: float, z_bin: float,
-               ridges: Sequence[RidgeLine] = ()) -> list[RidgeLine]:
-    """Lines along which the ceiling changes height (:class:`engine.ridges.RidgeLine`, in bins of ``bin_width``).
+               ridges: Sequence[RidgeLine] = (), *, points: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+               floor_z: int | None = None) -> list[RidgeLine]:
+    """Lines along which the ceiling changes height over a partition (:class:`engine.ridges.RidgeLine`, in bins
+    of ``bin_width``).
 
     In every ``ridge_params.chunk`` stretch along each axis, a pixel boundary is a step where the
     ``level_window`` metres of ceiling before it and after it are each covered over at least ``min_scanned``,
@@ -171,9 +235,19 @@ def step_lines(ceiling: Occupancy, p: CeilingParams, ridge_params: RidgeParams, 
     it or its shadow), and their median heights differ by at least ``step`` metres.  Steps are followed from
     chunk to chunk like ridges (:func:`engine.ridges._lines`: a line runs ``min_run`` m at least, within one
     pixel); a line within ``min_spacing`` of a ridge line over the same stretch is that wall and is left out.
+
+    With ``min_partition`` > 0 a run of a line is kept only where a partition stands under it
+    (:func:`partition_support`): at least ``min_partition`` of its chunks, its first and last (the walls it
+    meets) not counted, hold a point of ``points`` (the space's ``bu``, ``bv``, ``bz`` bins, all heights)
+    within ``partition_tolerance`` of the line's position in that chunk, higher than ``floor_band`` over the
+    floor (``floor_z``, a z bin) and lower than ``ceiling_band`` under the lower of the step's two ceilings
+    (with ``both_halves``, one in each half of that band).  A soffit's or bulkhead's free edge is no wall.
     """
     if p.step <= 0 or p.span <= 0 or ceiling.height is None or ceiling.scanned.size == 0:
         return []
+    test = p.min_partition > 0
+    if test and (points is None or floor_z is None):
+        raise ValueError("step_lines: min_partition > 0 needs the space's points and floor_z")
     px = ceiling.pixel
     pm = px * bin_width
     s = max(1, int(round(p.level_window / pm)))
@@ -181,6 +255,15 @@ def step_lines(ceiling: Occupancy, p: CeilingParams, ridge_params: RidgeParams, 
     rp = dataclasses.replace(ridge_params, drift=pm, width=pm)
     need = p.step / z_bin
     sp = int(round(ridge_params.min_spacing / bin_width))
+    if test:
+        bz = np.asarray(points[2])
+        z_lo = floor_z + int(round(p.floor_band / z_bin))
+        top = int(np.max(ceiling.height))
+        band = (bz >= z_lo) & (bz < top)  # the vertical band of every line lies within this one
+        pu, pv, pz = np.asarray(points[0])[band], np.asarray(points[1])[band], bz[band]
+        tol = int(round(p.partition_tolerance / bin_width))
+        cb = c * px
+        ceil_band = int(round(p.ceiling_band / z_bin))
     out: list[RidgeLine] = []
     for axis in (0, 1):
         h = ceiling.height if axis == 0 else ceiling.height.T
@@ -192,6 +275,9 @@ def step_lines(ceiling: Occupancy, p: CeilingParams, ridge_params: RidgeParams, 
             diff = np.abs(before - after)
             mask = ((cov_b >= p.min_scanned) & (cov_a >= p.min_scanned) & (diff >= need)
                     & (spread_b < need) & (spread_a < need))
+        if test:
+            normal, along = (pu, pv) if axis == 0 else (pv, pu)
+            lower = np.fmin(before, after)  # the lower ceiling's level at each step (z bins)
         for r in _lines(mask, np.nan_to_num(diff), axis, 0, 0, 1, rp, pm):
             line = RidgeLine(axis, n0 + r.cut * px, tuple((a0 + a * c * px, a0 + b * c * px) for a, b in r.runs),
                              r.strength, n0 + (r.lo if r.lo is not None else r.cut) * px,
@@ -199,5 +285,27 @@ def step_lines(ceiling: Occupancy, p: CeilingParams, ridge_params: RidgeParams, 
             if any(q.axis == axis and abs(q.cut - line.cut) < sp
                    and any(q.covered(a, b) for a, b in line.runs) for q in ridges):
                 continue
+            if test:
+                # the line's position in each chunk: the mean of its steps there (its cut where it has none)
+                lo, hi = (r.lo if r.lo is not None else r.cut), (r.hi if r.hi is not None else r.cut)
+                m = mask[lo:hi + 1]
+                cnt = m.sum(axis=0)
+                pos = np.where(cnt > 0, (m * np.arange(lo, hi + 1)[:, None]).sum(axis=0) / np.maximum(cnt, 1), r.cut)
+                centre = n0 + pos * px
+                z_hi = float(np.median(lower[lo:hi + 1][m])) - ceil_band  # under the lower ceiling
+                if p.both_halves:  # points at all heights, not furniture only: in each half of the band
+                    mid = 0.5 * (z_lo + z_hi)
+                    low_half, high_half = pz < mid, (pz >= mid) & (pz < z_hi)
+                    held = (partition_support(normal[low_half], along[low_half], a0, cb, centre, tol)
+                            & partition_support(normal[high_half], along[high_half], a0, cb, centre, tol))
+                else:
+                    sel = pz < z_hi
+                    held = partition_support(normal[sel], along[sel], a0, cb, centre, tol)
+                # a run's end chunks are left out: the walls it meets stand there under a soffit's edge too
+                runs = tuple((a0 + a * cb, a0 + b * cb) for a, b in r.runs
+                             if b - a > 2 and held[a + 1:b - 1].mean() >= p.min_partition)
+                if not runs:
+                    continue
+                line = dataclasses.replace(line, runs=runs)
             out.append(line)
     return out

@@ -267,7 +267,8 @@ def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, fl
     ridges = space_ridges(bu, bv, bzs, int(bz[0]), grid.z_bin, params.ridges, grid.bin_width)
     # a ceiling that changes height is a wall too (engine.ceilings): its step lines cut and divide like ridges
     ceiling = ceiling_occupancy(bu, bv, bzs, int(bz[0]), params.ceilings, grid.bin_width, grid.z_bin)
-    ridges = ridges + step_lines(ceiling, params.ceilings, params.ridges, grid.bin_width, grid.z_bin, ridges)
+    ridges = ridges + step_lines(ceiling, params.ceilings, params.ridges, grid.bin_width, grid.z_bin, ridges,
+                                 points=(bu, bv, bzs), floor_z=int(bz[0]) - int(round(params.upper_band / grid.z_bin)))
     cells, dividers, _ = slice_storeys(mem, sub, [tuple(fl[0])], start, params.slicing_walls, bz,
                                        max_levels=params.max_levels, ridges=ridges, ridge_params=params.ridges)
     edges = neighbour_edges(cells, params.walls.bins(params.min_face))

@@ -116,7 +116,8 @@ def _steps(pts: np.ndarray, p: CeilingParams = P):
     from engine.ridges import RidgeParams
 
     bu, bv, bz = _bins(pts)
-    return step_lines(ceiling_occupancy(bu, bv, bz, BAND, p, BW, ZB), p, RidgeParams(), BW, ZB)
+    return step_lines(ceiling_occupancy(bu, bv, bz, BAND, p, BW, ZB), p, RidgeParams(), BW, ZB,
+                      points=(bu, bv, bz), floor_z=0)
 
 
 def test_a_line_where_the_ceiling_changes_height_is_a_step_line():
@@ -146,27 +147,120 @@ def test_a_beam_and_its_shadow_are_no_step():
     pts = np.concatenate(pts)
     assert _steps(pts) == []
     assert _steps(pts, CeilingParams(level_window=0.5)) == []
-    # the same beam 1.2 m wide (a lowered ceiling over a whole window) is a step
+    # the same beam 1.2 m wide (a lowered ceiling over a whole window) is a step, but a bulkhead with nothing
+    # under its edges: no step line with the partition test
     wide = np.concatenate([pts, _surface(rng, 250 * 6, (3.8, 4.7), (0, 6), (2.6, 2.6))])
     wide = wide[~((wide[:, 0] >= 3.8) & (wide[:, 0] < 4.7) & (wide[:, 2] > 2.9))]
-    assert _steps(wide) != []
+    assert _steps(wide, CeilingParams(min_partition=0.0)) != []
+    assert _steps(wide) == []
 
 
-def test_rooms_under_two_ceilings_parted_by_glass_are_two_spaces_in_the_refinement():
+def _refined_spaces(pts: np.ndarray, ceilings: CeilingParams) -> int:
+    """Spaces of the refinement of one storey (floor at z 0, upper band from 2.2 m) parsed from ``pts``."""
     from engine.alignment import Frame
     from engine.histograms import Grid
     from engine.refine import MemoryStore, _parse_part
     from engine.spaces import SpaceParams
 
-    rng = np.random.default_rng(5)
-    pts = _two_ceilings(rng)
     raw = {a: np.round(pts[:, i] / 0.001).astype(np.int64) for i, a in enumerate("xyz")}
     mem = MemoryStore(raw, (0.001,) * 3, (0.0,) * 3, (0.0, 0.0, 0.0))
-    spaces = []
-    for step in (0.1, 0.0):
-        p = SpaceParams(ceilings=CeilingParams(step=step))
-        grid = Grid.for_store(mem, Frame(0.0, (0.0, 0.0, 0.0)), p.bin_width, p.z_bin)
-        part = _parse_part(mem, 0.0, grid, p, 0, np.array([[-1, int(4.0 / ZB)]]), np.array([BAND]))
-        spaces.append(part.n_spaces)
+    p = SpaceParams(ceilings=ceilings)
+    grid = Grid.for_store(mem, Frame(0.0, (0.0, 0.0, 0.0)), p.bin_width, p.z_bin)
+    return _parse_part(mem, 0.0, grid, p, 0, np.array([[-1, int(4.0 / ZB)]]), np.array([BAND])).n_spaces
+
+
+def test_rooms_under_two_ceilings_parted_by_glass_are_two_spaces_in_the_refinement():
+    pts = _two_ceilings(np.random.default_rng(5))
+    spaces = [_refined_spaces(pts, CeilingParams(step=step)) for step in (0.1, 0.0)]
     # the glass leaves no void and no ridge: without the step line the two rooms are one space
     assert spaces == [2, 1]
+
+
+def _soffit_room(rng, per_m2: float = 250.0, furniture: bool = True) -> np.ndarray:
+    """One room (u 0-8 m, v 0-6 m) under a ceiling at 3.0 m, with a soffit along its whole wall at u 0: a strip
+    1.5 m wide whose ceiling is 0.4 m lower (2.6 m), closed by its vertical face at u 1.5 m from 2.6 to 3.0 m.
+    Under the soffit's edge there is open air down to the floor; with ``furniture``, a desk (top at 0.75 m)
+    crosses the edge at v 2.0-2.8 m and a cabinet (1.2 m tall) stands astride it at v 4.55-5.0 m."""
+    pts = [_surface(rng, int(per_m2 * 48), (0, 8), (0, 6), (0, 0)),
+           _surface(rng, int(per_m2 * 9), (0, 1.5), (0, 6), (2.6, 2.6)),             # the soffit's underside
+           _surface(rng, int(per_m2 * 39), (1.5, 8), (0, 6), (3.0, 3.0)),            # the room's ceiling
+           _surface(rng, int(per_m2 * 6 * 0.4), (1.5, 1.505), (0, 6), (2.6, 3.0))]   # the soffit's face
+    for u, top in ((0.0, 2.6), (7.995, 3.0)):
+        pts.append(_surface(rng, int(per_m2 * 6 * top), (u, u + 0.005), (0, 6), (0, top)))
+    for v in (0.0, 5.995):
+        pts.append(_surface(rng, int(per_m2 * 1.5 * 2.6), (0, 1.5), (v, v + 0.005), (0, 2.6)))
+        pts.append(_surface(rng, int(per_m2 * 6.5 * 3.0), (1.5, 8), (v, v + 0.005), (0, 3.0)))
+    if furniture:
+        pts.append(_surface(rng, int(per_m2 * 1.6 * 0.8), (1.1, 2.7), (2.0, 2.8), (0.75, 0.75)))
+        pts.append(_surface(rng, int(per_m2 * 0.6 * 0.45), (1.2, 1.8), (4.55, 5.0), (1.2, 1.2)))
+        pts.append(_surface(rng, int(per_m2 * 0.6 * 1.2), (1.2, 1.8), (4.55, 4.555), (0, 1.2)))
+    return np.concatenate(pts)
+
+
+def test_a_soffit_edge_is_no_step_line():
+    # the ceiling changes height by 0.4 m along the whole 6 m edge, each side level over more than 1 m: the
+    # step alone cannot tell it from a partition.  Under the edge there is no partition, only the floor, the walls
+    # at its ends and two pieces of furniture: no step line
+    rng = np.random.default_rng(6)
+    for furniture in (False, True):
+        pts = _soffit_room(rng, furniture=furniture)
+        assert _steps(pts) == []
+        # without the partition test (the first rule) it is one
+        off = _steps(pts, CeilingParams(min_partition=0.0))
+        assert len(off) == 1 and abs(off[0].cut * BW - 1.5) <= 0.15
+    # a row of desks across the edge along most of it: points near the line in most stretches, but in the lower
+    # half of the band only (a partition stands at all heights): no step line; one band alone takes it for one
+    desks = [_surface(rng, 200, (1.1, 2.7), (v, v + 0.8), (0.75, 0.75)) for v in (0.6, 1.6, 2.6, 3.6, 4.6)]
+    row = np.concatenate([_soffit_room(rng, furniture=False)] + desks)
+    assert _steps(row) == []
+    assert len(_steps(row, CeilingParams(both_halves=False))) == 1
+
+
+def test_a_step_over_a_partition_with_an_open_door_is_a_step_line():
+    # the glazed partition of _two_ceilings with a 1 m doorway (open: nothing under its head at 2.1 m) and a
+    # mullion every 1.2 m: the stretches of the doorway still hold the glass above its head
+    rng = np.random.default_rng(7)
+    pts = _two_ceilings(rng)
+    door = (np.abs(pts[:, 0] - 5.0) < 0.1) & (pts[:, 1] > 2.5) & (pts[:, 1] < 3.5) & (pts[:, 2] > 0.02) \
+        & (pts[:, 2] < 2.1)
+    pts = np.concatenate([pts[~door]] + [_surface(rng, 120, (4.97, 5.03), (v, v + 0.05), (0, 3.4))
+                                         for v in (1.2, 2.4, 3.6, 4.8)])
+    lines = _steps(pts)
+    assert len(lines) == 1 and lines[0].covered(0, 600) >= 500
+
+
+def test_partition_support_counts_the_stretches_with_a_point_near_the_line():
+    from engine.ceilings import partition_support
+
+    # a line along v at u bin 100 (200 at the fourth stretch: a line drifting), stretches of 50 bins from v 0
+    centre = np.array([100.0, 100.0, 100.0, 200.0])
+    normal = np.array([95, 130, 109, 100, 195])   # within 10 bins: stretch 0 (95), 2 (109), 3 (195)
+    along = np.array([10, 60, 120, 160, 199])
+    got = partition_support(normal, along, 0, 50, centre, 10)
+    assert got.tolist() == [True, False, True, True]
+    # points beyond the stretches are ignored
+    assert partition_support(np.array([100]), np.array([-5]), 0, 50, centre, 10).tolist() == [False] * 4
+
+
+def test_step_lines_need_the_points_for_the_partition_test():
+    import pytest
+    from engine.ceilings import step_lines
+    from engine.ridges import RidgeParams
+
+    bu, bv, bz = _bins(_two_ceilings(np.random.default_rng(8)))
+    occ = ceiling_occupancy(bu, bv, bz, BAND, P, BW, ZB)
+    with pytest.raises(ValueError):
+        step_lines(occ, P, RidgeParams(), BW, ZB)
+    assert len(step_lines(occ, CeilingParams(min_partition=0.0), RidgeParams(), BW, ZB)) == 1
+
+
+def test_a_room_with_a_soffit_stays_one_space_in_the_refinement():
+    pts = _soffit_room(np.random.default_rng(9))
+    # the first rule cut the room at the soffit's edge; with the partition test it is one space
+    assert [_refined_spaces(pts, CeilingParams(min_partition=m)) for m in (P.min_partition, 0.0)] == [1, 2]
+
+
+def test_ceiling_params_from_the_settings():
+    p = CeilingParams.from_dict({"both-halves": False, "min-partition": "0.25", "floor-band": 0.3, "other": 1})
+    assert p.both_halves is False and p.min_partition == 0.25 and p.floor_band == 0.3
+    assert CeilingParams.from_dict(CeilingParams().to_dict()) == CeilingParams()
