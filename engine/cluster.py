@@ -5,6 +5,12 @@ then ``DASK_SCHEDULER_ADDRESS`` (dask's ``scheduler-address``) name an existing
 cluster (``tcp://`` or ``tls://``, security from dask's own ``distributed.comm.tls``
 settings); with none of them a LocalCluster is started with one single-threaded
 worker per core and the machine's memory shared among them.
+
+Either way, the thread pools that libraries start on their own inside a worker
+(the LAZ decoder's, Zarr's codec pool, Blosc's) are pinned to the worker's
+thread count (:class:`LibraryThreads`), as dask advises: a single-threaded
+worker then uses one core, and two workers on two cores do not oversubscribe
+them.
 """
 from __future__ import annotations
 
@@ -19,6 +25,7 @@ from urllib.parse import urlparse
 
 import dask
 from distributed import Client, LocalCluster
+from distributed.diagnostics.plugin import WorkerPlugin
 
 from engine import config
 from tiles import paths
@@ -68,6 +75,7 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
         )
         client = Client(cluster)
     try:
+        pin_library_threads(client)
         if not quiet:
             link = client.dashboard_link if _has_dashboard(client) else "(no dashboard)"
             where = address or f"local cluster, {len(client.scheduler_info()['workers'])} workers"
@@ -77,6 +85,56 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+class LibraryThreads(WorkerPlugin):
+    """Pins the thread pools of the libraries the tasks call to the worker's own thread count.
+
+    Without it a single-threaded worker uses more than one core: lazrs decodes
+    the chunks of a LAZ part on a rayon pool of one thread per core (ingest on
+    one worker ran at 1.2 cores), and Zarr decodes the chunks of an array read
+    on a pool of ``cores + 4`` threads.  That hides work from the scheduler:
+    one worker looks faster than it is, and two workers on two cores run four
+    decoder threads.  dask does the same for the BLAS and OpenMP pools
+    (``OMP_NUM_THREADS=1`` etc. in ``distributed.nanny.pre-spawn-environ``).
+
+    ``setup`` runs on every worker (and every worker that joins later) before
+    it runs a task of ours: rayon sizes its pool from ``RAYON_NUM_THREADS``
+    when the pool is first used, Zarr its executor from
+    ``threading.max_workers`` when it first reads.  A worker that has already
+    used them keeps its pools (the setting then has no effect).  Blosc is
+    pinned too, although numcodecs uses Blosc's threads only from a process's
+    main thread, never from a task's.
+    """
+
+    name = "buildingparser-library-threads"
+
+    def __init__(self, threads: int | None = None):
+        self.threads = threads
+
+    def setup(self, worker) -> None:
+        n = int(self.threads or worker.state.nthreads or 1)
+        os.environ["RAYON_NUM_THREADS"] = str(n)
+        import numcodecs.blosc
+        import zarr
+
+        zarr.config.set({"threading.max_workers": n})
+        numcodecs.blosc.set_nthreads(n)
+
+
+def library_threads() -> int | None:
+    """``buildingparser.library-threads``: threads of the libraries' own pools per worker (None: the worker's
+    thread count; 0: leave the libraries' defaults)."""
+    v = config.get("library-threads")
+    return None if v is None else int(v)
+
+
+def pin_library_threads(client: Client | None) -> None:
+    """Register :class:`LibraryThreads` on the client's workers (unless ``library-threads`` is 0)."""
+    n = library_threads()
+    if client is None or n == 0:
+        return
+    client.register_plugin(LibraryThreads(n), name=LibraryThreads.name)
 
 
 def _security_for(address: str):

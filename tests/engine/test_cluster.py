@@ -135,3 +135,46 @@ def test_workers_keep_freed_memory_for_the_next_task(client):
             dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_")) == tuple(map(int, want))
     got = client.run(lambda: (os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("MALLOC_MMAP_THRESHOLD_")))
     assert set(got.values()) == {want}
+
+
+def _pools() -> dict:
+    import os
+
+    import numcodecs.blosc
+    import zarr
+
+    return {"rayon": os.environ.get("RAYON_NUM_THREADS"), "zarr": zarr.config.get("threading.max_workers"),
+            "blosc": numcodecs.blosc.get_nthreads()}
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_library_pools_pinned_to_the_worker_threads(threads, monkeypatch):
+    """A worker's LAZ decoder (rayon), Zarr and Blosc pools get the worker's thread count, not one per core."""
+    from distributed import Client, LocalCluster
+
+    monkeypatch.setenv("RAYON_NUM_THREADS", "7")  # what the worker would inherit otherwise
+    with LocalCluster(n_workers=1, threads_per_worker=threads, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR) as lc, Client(lc) as c:
+        before = next(iter(c.run(_pools).values()))
+        assert before["rayon"] == "7"  # inherited until pinned
+        cluster.pin_library_threads(c)
+        after = next(iter(c.run(_pools).values()))
+        assert after == {"rayon": str(threads), "zarr": threads, "blosc": threads}
+        with dask.config.set({"buildingparser.library-threads": 0}):
+            cluster.pin_library_threads(c)  # 0: left alone (the plugin registered before stays)
+        assert next(iter(c.run(_pools).values())) == after
+
+
+def test_embedded_cluster_and_run_pin_library_pools(tmp_path, monkeypatch):
+    """cluster_client pins the pools of its workers; so does pipeline.run on a client it is given."""
+    from engine import pipeline
+
+    with dask.config.set({"scheduler-address": None, "buildingparser.scheduler": None}), \
+            cluster.cluster_client(n_workers=1, memory_limit="1GiB", quiet=True) as c:
+        assert next(iter(c.run(_pools).values()))["rayon"] == "1"
+    seen = []
+    monkeypatch.setattr(pipeline, "pin_library_threads", seen.append)
+    monkeypatch.setattr(pipeline, "_withdraw_report", lambda out, opt: (_ for _ in ()).throw(RuntimeError("stop")))
+    with pytest.raises(RuntimeError, match="stop"):
+        pipeline.run(str(tmp_path / "in.laz"), str(tmp_path / "out"), client="a client")
+    assert seen == ["a client"]
