@@ -702,8 +702,13 @@ def apply_crf(proposals: list[Proposal], weights: CRFWeights, client=None, *,
     w_arg: Any = weights
     if client is not None and items:
         w_arg = client.scatter(weights, broadcast=True, hash=False)
-    results = run_tasks(_crf_task, items, client=client, label="CRF per space", keys=[f"space {s}" for s in sids],
-                        extra_args=(w_arg, settings))
+    # the spaces with most proposals first (the solve grows with them): no long task left alone at the end
+    order = sorted(range(len(sids)), key=lambda k: (-len(items[k]), sids[k]))
+    done = run_tasks(_crf_task, [items[k] for k in order], client=client, label="CRF per space",
+                     keys=[f"space {sids[k]}" for k in order], extra_args=(w_arg, settings))
+    results: list[Any] = [None] * len(sids)
+    for k, r in zip(order, done):
+        results[k] = r
     keep = np.zeros(len(proposals), dtype=bool)
     infos = []
     for sid, (mask, margin, info) in zip(sids, results):

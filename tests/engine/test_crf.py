@@ -263,6 +263,35 @@ def test_apply_crf_on_the_cluster_equals_space_by_space(client):
     assert set(block) == {"spaces", "solve_seconds", "status", "proposals", "kept"} and block["kept"] == len(kept)
 
 
+def test_apply_crf_submits_the_largest_spaces_first_and_reports_by_space(client, monkeypatch):
+    """Spaces with most proposals are submitted first (no long solve left for the end); kept set, margins and
+    the per-space report stay in space order, as when submitted by id."""
+    import engine.crf as crf
+
+    props, _ = make_scenes(4, seed=3, grid=K)
+    flat = [p for ps in props for p in ps]
+    w = random_weights(np.random.default_rng(2), scale=0.3, kk=2)
+    sent = []
+    real = crf.run_tasks
+
+    def spy(fn, items, **kw):
+        sent.append([len(it) for it in items])
+        return real(fn, items, **kw)
+
+    monkeypatch.setattr(crf, "run_tasks", spy)
+    kept, report = apply_crf(flat, w, client=client)
+    assert sent[0] == sorted(sent[0], reverse=True) and sent[0] != [len(ps) for ps in props]
+    margins = [p.extra["crf_margin"] for p in flat]
+    alone = [apply_crf(list(ps), w) for ps in props]  # one space at a time, here
+    assert [(p.space_id, p.score) for p in kept] == [(p.space_id, p.score) for ks, _ in alone for p in ks]
+    assert margins == [p.extra["crf_margin"] for p in flat]
+
+    def info(i):
+        return i["space_id"], i["status"], i["nodes"], i["edges"], i["kept"]
+
+    assert [info(i) for i in report["per_space"]] == [info(i) for _, r in alone for i in r["per_space"]]
+
+
 def test_margins_agree_with_the_kept_set_and_rank_in_context():
     a = prop(WALL, [0.00, 0, 0], [0.05, 1, 1], 1.0)
     b = prop(WALL, [0.01, 0, 0], [0.05, 1, 1], 0.6)

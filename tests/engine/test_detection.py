@@ -105,6 +105,30 @@ def test_small_model_detects_walls_floor_and_ceiling(buildings, trained, client)
     assert ev.ap["floor"] > 0.5 and ev.ap["ceiling"] > 0.5 and ev.ap["wall"] > 0.5
 
 
+def test_largest_spaces_are_submitted_first_with_the_same_proposals(buildings, trained, client, monkeypatch):
+    """Tasks start in submission order: the spaces with most points go first (no long task left for the end of
+    the stage), and the proposals, their order and element ids are those of submitting by space id."""
+    import engine.detection as det
+
+    _, stores = buildings
+    store = stores["test"]
+    sent = []
+    real = det.run_tasks
+
+    def spy(fn, items, **kw):
+        sent.append([ref for ref, _ in items])
+        return real(fn, items, **kw)
+
+    monkeypatch.setattr(det, "run_tasks", spy)
+    props = detect(store, model=trained, client=client, space_array="gt_space")
+    counts = [r.count for r in sent[0]]
+    assert len(counts) > 2 and counts == sorted(counts, reverse=True) and sent[0] != sorted(sent[0], key=lambda r: r.space_id)
+    monkeypatch.setattr(det, "by_size", lambda refs: refs)  # id order, as before
+    before = detect(store, model=trained, client=client, space_array="gt_space")
+    assert [(p.element_id, p.space_id, p.class_code, p.score, tuple(p.center), tuple(p.world_size)) for p in props] \
+        == [(p.element_id, p.space_id, p.class_code, p.score, tuple(p.center), tuple(p.world_size)) for p in before]
+
+
 def test_training_again_on_the_same_data_writes_the_same_model(buildings, client, tmp_path):
     from engine.training import TrainSettings, train
 
