@@ -168,3 +168,21 @@ def corridor_plan(n_rooms: int = 4, room_w: float = 4.0, room_d: float = 5.0, co
                 rooms.append(Room(x0, y0, x0 + room_w, y0 + room_d, f))
                 doors.append((len(rooms) - 1, base, 1.0, 0.9))
     return Plan(rooms, doors, wall=wall)
+
+
+# --- loose point sets for the refinement's raster tests (ridges, ceilings) ---------------------------------------
+
+def box_points(rng: np.random.Generator, n: int, u, v, z) -> np.ndarray:
+    """``n`` points uniform in the box ``u x v x z`` (pairs of bounds)."""
+    return np.stack([rng.uniform(*u, n), rng.uniform(*v, n), rng.uniform(*z, n)], axis=1)
+
+
+#: Raster bin across and in height, and the first bin of the upper band (2.2 m over a floor at z 0).
+BW, ZB = 0.01, 0.02
+BAND = int(round(2.2 / ZB))
+
+
+def point_bins(pts: np.ndarray, bw: float = BW, zb: float = ZB) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Histogram bins (u, v, z) of points: ``bw`` across, ``zb`` in height."""
+    return (np.floor(pts[:, 0] / bw).astype(np.int64), np.floor(pts[:, 1] / bw).astype(np.int64),
+            np.floor(pts[:, 2] / zb).astype(np.int64))

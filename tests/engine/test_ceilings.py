@@ -6,20 +6,11 @@ import numpy as np
 from engine.ceilings import CeilingParams, ceiling_dividers, ceiling_occupancy
 from engine.merging import Edge
 from engine.ridges import Occupancy
+from tests.engine.handmade import BAND, BW, ZB
+from tests.engine.handmade import box_points as _surface
+from tests.engine.handmade import point_bins as _bins
 
-BW, ZB = 0.01, 0.02
-BAND = int(round(2.2 / ZB))  # upper band from 2.2 m (floor at z 0)
 P = CeilingParams()
-
-
-def _bins(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return (np.floor(pts[:, 0] / BW).astype(np.int64), np.floor(pts[:, 1] / BW).astype(np.int64),
-            np.floor(pts[:, 2] / ZB).astype(np.int64))
-
-
-def _surface(rng, n, u, v, z) -> np.ndarray:
-    """``n`` points uniform in the box ``u x v x z`` (pairs of bounds)."""
-    return np.stack([rng.uniform(*u, n), rng.uniform(*v, n), rng.uniform(*z, n)], axis=1)
 
 
 def _lobby_and_shaft(rng, per_m2: float = 250.0) -> np.ndarray:

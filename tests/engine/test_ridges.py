@@ -7,20 +7,11 @@ from engine.dividers import DividerParams, detect_dividers
 from engine.merging import Edge, ridge_faces
 from engine.ridges import Occupancy, RidgeLine, RidgeParams, box_cuts, face_pieces, find_ridges, space_ridges
 from engine.slicing import split_histogram
+from tests.engine.handmade import BAND, BW, ZB
+from tests.engine.handmade import box_points as _surface
+from tests.engine.handmade import point_bins as _bins
 
-BW, ZB = 0.01, 0.02
-BAND = int(round(2.2 / ZB))  # upper band from 2.2 m (floor at z 0)
 P = RidgeParams()
-
-
-def _bins(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return (np.floor(pts[:, 0] / BW).astype(np.int64), np.floor(pts[:, 1] / BW).astype(np.int64),
-            np.floor(pts[:, 2] / ZB).astype(np.int64))
-
-
-def _surface(rng, n, u, v, z) -> np.ndarray:
-    """``n`` points uniform in the box ``u x v x z`` (pairs of bounds)."""
-    return np.stack([rng.uniform(*u, n), rng.uniform(*v, n), rng.uniform(*z, n)], axis=1)
 
 
 def _rooms(rng, width: float = 10.0, depth: float = 6.0, height: float = 3.0, per_m2: float = 250.0) -> np.ndarray:
