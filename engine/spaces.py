@@ -83,7 +83,7 @@ from engine.ceilings import CeilingParams
 from engine.dividers import DividerParams, vertical_params
 from engine.histograms import BoxIndex, Grid, share, tile_extents, tiles_by_size, tiles_touching, z_histogram
 from engine.merging import Edge, MergeRules, merge, neighbour_edges, test_edges
-from engine.refine import Refinement, clipped_footprint, face_side_space, refine_space, relabel
+from engine.refine import Refinement, clipped_footprint, face_side_space, refine_spaces, relabel
 from engine.rejoin import rejoin_pieces
 from engine.ridges import RidgeParams
 from engine.slicing import Box, FoundDivider, find_storeys, floor_levels, slice_storeys
@@ -390,9 +390,7 @@ def _refine(store, grid: Grid, p: SpaceParams, floors: np.ndarray, band_z: np.nd
                       "tiles": [names[i] for i in np.flatnonzero(touch)]})
     if not items:
         return []
-    return run_tasks(refine_space, items, client=client, label="spaces: refining large spaces",
-                     keys=[it["space"] for it in items],
-                     extra_args=(store, share(client, index), grid, p, floors, band_z))
+    return refine_spaces(items, store, index, grid, p, floors, band_z, client)  # largest first, parallel reads
 
 
 @dataclass
