@@ -83,7 +83,11 @@ class Grid:
         return out[0], out[1], t.astype(np.int64)
 
     def tile_bins(self, store, tile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(bu, bv, bz)`` of every point of a tile."""
+        """``(bu, bv, bz)`` of every point of a tile (a store that keeps its bins, such as the in-memory store
+        of a refined space, :class:`engine.refine.MemoryStore`, hands out its read-only copy)."""
+        cached = getattr(store, "cached_bins", None)
+        if cached is not None:
+            return cached(self, tile)
         return self.raw_bins(store.read(tile, ("x", "y", "z")), self.raw_affine(store.meta))
 
     def tile_z_bins(self, raw_z: np.ndarray, meta) -> np.ndarray:

@@ -97,6 +97,22 @@ def test_memory_store_gives_the_bins_of_the_real_coordinates():
     assert np.mean(bu == np.floor(u / 0.01)) > 0.99  # floating rounding at bin edges aside
 
 
+def test_memory_store_computes_the_bins_once_per_grid():
+    """The refinement's passes share one copy of the bins (read-only) instead of computing them per pass."""
+    rng = np.random.default_rng(3)
+    origin = (1005.0, 2003.0, 10.0)
+    raw = {a: rng.integers(0, 20000, 500).astype(np.int32) for a in "xyz"}
+    mem = MemoryStore(raw, (0.001, 0.001, 0.001), (1000.0, 2000.0, 10.0), origin)
+    grid = Grid.for_store(mem, Frame(0.3, origin), 0.01, 0.02)
+    first = grid.tile_bins(mem, "memory")
+    assert grid.tile_bins(mem, "memory") is first  # the same arrays, not computed again
+    plain = grid.raw_bins(raw, grid.raw_affine(mem.meta))
+    assert all(np.array_equal(a, b) and not a.flags.writeable for a, b in zip(first, plain))
+    other = Grid.for_store(mem, Frame(0.5, origin), 0.01, 0.02)  # another frame: computed for it
+    turned = other.tile_bins(mem, "memory")
+    assert turned is not first and np.array_equal(turned[0], other.raw_bins(raw, other.raw_affine(mem.meta))[0])
+
+
 def test_relabel_moves_only_the_refined_spaces_points_into_the_new_cells():
     from engine.slicing import Box
 

@@ -194,6 +194,26 @@ def winged(tmp_path_factory, client):
 
 
 @pytest.mark.slow
+def test_refinement_on_the_cluster_equals_the_serial_one(winged, client, monkeypatch):
+    """Refined spaces read by one task per tile, largest first, with the bins kept by the memory store, give
+    the parse of the serial refinement that reads each space in one go and computes the bins per pass."""
+    import engine.refine as refine
+
+    def parsed():
+        return ({k: v for k, v in p.to_doc().items() if k != "stats"},
+                [winged.read(t.name, ["cell_id", "space_id"]) for t in winged.tiles])
+
+    p = parse_spaces(winged, client=client)
+    assert p.stats["refined"], "the wing is refined"
+    fast = parsed()
+    monkeypatch.setattr(refine.MemoryStore, "cached_bins", None)  # Grid.tile_bins computes them every pass
+    p = parse_spaces(winged, client=None)
+    slow = parsed()
+    assert fast[0] == slow[0]
+    assert all(np.array_equal(a[c], b[c]) for a, b in zip(fast[1], slow[1]) for c in ("cell_id", "space_id"))
+
+
+@pytest.mark.slow
 def test_a_wing_at_an_angle_is_cut_into_its_rooms(winged, client):
     # without the refinement the wing's walls smear in the building's frame: the whole wing is one cell
     before = parse_spaces(winged, client=client, params=SpaceParams.from_config(refine_min_area=0.0))
