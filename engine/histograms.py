@@ -325,15 +325,19 @@ def histogram_pass(fn, tiles: list[str], lo: np.ndarray, length: np.ndarray, *, 
     """Run a per-tile histogram task over the tiles and sum the blocks, batch by batch.
 
     The driver holds one batch of tile results at a time (``buildingparser.spaces.batch-tiles``
-    tiles), so its memory does not grow with the building.
+    tiles), so its memory does not grow with the building.  A store (``extra_args[0]``) whose tiles'
+    data are futures on the workers (:class:`engine.refine.PieceStore`) gives them as the tasks'
+    inputs (``task_input``), so that each task runs where its data is.
     """
     import dask.config
 
     batch = max(1, int(dask.config.get("buildingparser.spaces.batch-tiles", 256) or 256))
     out = [np.zeros(int(n), dtype=np.int64) for n in length]
+    task_input = getattr(extra_args[0], "task_input", None) if extra_args and client is not None else None
     for start in range(0, len(tiles), batch):
         part_tiles = list(tiles[start:start + batch])
-        parts = run_tasks(fn, part_tiles, client=client, label=label, keys=part_tiles, extra_args=extra_args)
+        inputs = [task_input(t) for t in part_tiles] if task_input is not None else part_tiles
+        parts = run_tasks(fn, inputs, client=client, label=label, keys=part_tiles, extra_args=extra_args)
         accumulate(parts, lo, length, out)
     return out
 

@@ -102,11 +102,77 @@ class MemoryStore:
             self._bins = (key, bins)
         return self._bins[1]
 
+    def drop_bins(self) -> None:
+        """Forget the kept bins (memory)."""
+        self._bins = None
+
     def xy_local(self) -> np.ndarray:
         """Horizontal coordinates relative to the origin (float64 ``(n, 2)``)."""
         m = self.meta
         return np.stack([self.raw[a] * m.scale[i] + (m.offset[i] - m.origin[i]) for i, a in enumerate("xy")],
                         axis=1)
+
+
+class PieceStore:
+    """A :class:`MemoryStore` whose tiles are pieces of its points held by the workers, one piece per worker
+    thread, so that the refinement's histogram passes run as one task per piece on the cluster.
+
+    Each piece (a contiguous slice of the points, a :class:`MemoryStore` that
+    keeps its own bins) is sent once to one worker; a pass's task for a piece
+    takes the piece's future as its input (:meth:`task_input`), so dask runs it
+    where the piece is.  The store itself pickles to its metadata and tile
+    names; the whole store (tile ``"memory"``) stays with the task that made it.
+    A pass sums integer counts over tiles, so its result does not depend on how
+    the points are split.
+    """
+
+    def __init__(self, mem: MemoryStore, client, slots: list[str]) -> None:
+        n = mem.meta.point_count
+        cuts = np.linspace(0, n, len(slots) + 1).astype(np.int64)
+        m = mem.meta
+        self._mem: MemoryStore | None = mem
+        self._futures = []
+        self.tiles = []
+        for i, (a0, a1, addr) in enumerate(zip(cuts[:-1], cuts[1:], slots)):
+            piece = MemoryStore({a: mem.raw[a][a0:a1] for a in "xyz"}, m.scale, m.offset, m.origin)
+            self._futures.append(client.scatter(piece, workers=[addr], hash=False))
+            self.tiles.append(MemoryTile(f"piece-{i}", piece.meta.point_count, piece.meta.bounds))
+        self.meta = m
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"meta": self.meta, "tiles": self.tiles}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._mem, self._futures = None, []
+
+    def task_input(self, tile: str):
+        """What a pass's task gets for ``tile``: the future of its piece (dask resolves it on the worker)."""
+        return self._futures[int(str(tile).rsplit("-", 1)[1])]
+
+    def _piece(self, tile: Any) -> MemoryStore:
+        if isinstance(tile, MemoryStore):
+            return tile
+        if tile == "memory" and self._mem is not None:
+            return self._mem
+        raise KeyError(f"{tile!r}: a piece is read through its task input")
+
+    def read(self, tile: Any, columns) -> dict[str, np.ndarray]:
+        return self._piece(tile).read(tile, columns)
+
+    def cached_bins(self, grid: Grid, tile: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._piece(tile).cached_bins(grid, tile)
+
+
+def _in_task() -> bool:
+    """Whether this code runs in a dask worker's task."""
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except ValueError:
+        return False
+    return True
 
 
 # -- the space's own frame(s) --------------------------------------------------------------------------------
@@ -278,8 +344,30 @@ def gather_space(store, tiles: list[str], index: BoxIndex, grid: Grid, cells: np
 
 
 def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, floors: np.ndarray,
-                band_z: np.ndarray) -> Part:
-    """Recursive slicing and merging of a memory store's points in the frame ``yaw``."""
+                band_z: np.ndarray, pieces_points: int = 0) -> Part:
+    """Recursive slicing and merging of a memory store's points in the frame ``yaw``.
+
+    In a dask task on a cluster with more than one thread, the histogram passes
+    of a space of at least ``pieces_points`` points (> 0) run as tasks over
+    pieces of its points (:class:`PieceStore`): the refinement of one large
+    space no longer keeps the other workers idle.
+    """
+    if pieces_points <= 0 or mem.meta.point_count < pieces_points or not _in_task():
+        return _parse_part_with(mem, mem, yaw, grid, params, floor, floors, band_z, None)
+    from distributed import worker_client
+
+    with worker_client() as client:
+        workers = client.scheduler_info()["workers"]
+        slots = [a for a in sorted(workers) for _ in range(max(1, int(workers[a].get("nthreads", 1))))]
+        if len(slots) < 2:
+            return _parse_part_with(mem, mem, yaw, grid, params, floor, floors, band_z, None)
+        return _parse_part_with(mem, PieceStore(mem, client, slots), yaw, grid, params, floor, floors, band_z,
+                                client)
+
+
+def _parse_part_with(mem: MemoryStore, passes, yaw: float, grid: Grid, params, floor: int, floors: np.ndarray,
+                     band_z: np.ndarray, client) -> Part:
+    """:func:`_parse_part` with the histogram passes over ``passes`` (``mem`` or its :class:`PieceStore`)."""
     from engine.ceilings import ceiling_dividers, ceiling_occupancy, step_lines
     from engine.merging import merge, neighbour_edges, ridge_faces, test_edges
     from engine.ridges import Occupancy, space_ridges
@@ -299,14 +387,18 @@ def _parse_part(mem: MemoryStore, yaw: float, grid: Grid, params, floor: int, fl
     ceiling = ceiling_occupancy(bu, bv, bzs, int(bz[0]), params.ceilings, grid.bin_width, grid.z_bin)
     ridges = ridges + step_lines(ceiling, params.ceilings, params.ridges, grid.bin_width, grid.z_bin, ridges,
                                  points=(bu, bv, bzs), floor_z=int(bz[0]) - int(round(params.upper_band / grid.z_bin)))
-    cells, dividers, _ = slice_storeys(mem, sub, [tuple(fl[0])], start, params.slicing_walls, bz,
+    occ = (Occupancy.build(bu, bv, bzs, int(bz[0]), params.ridges.bins(params.ridges.occupancy_pixel, grid.bin_width))
+           if ridges else None)
+    if passes is not mem:  # the passes read the pieces: this task's copy of the bins is no longer needed
+        del bu, bv, bzs
+        mem.drop_bins()
+    cells, dividers, _ = slice_storeys(passes, sub, [tuple(fl[0])], start, params.slicing_walls, bz, client=client,
                                        max_levels=params.max_levels, ridges=ridges, ridge_params=params.ridges)
     edges = neighbour_edges(cells, params.walls.bins(params.min_face))
-    test_edges(mem, sub, fl, cells, edges, params.walls, params.merge_window, bz)
+    test_edges(passes, sub, fl, cells, edges, params.walls, params.merge_window, bz, client=client)
     # a side with a ceiling in the storey and a side without one (a stair shaft) are not one room
     edges = ceiling_dividers(edges, ceiling, params.ceilings, grid.bin_width)
     if ridges:
-        occ = Occupancy.build(bu, bv, bzs, int(bz[0]), params.ridges.bins(params.ridges.occupancy_pixel, grid.bin_width))
         edges = ridge_faces(edges, ridges, params.ridges, grid.bin_width, occ)
     comps = merge(cells, edges, grid.bin_width, params.rules)
     for c in cells:
@@ -325,12 +417,14 @@ def refine_space(item: dict[str, Any], store, index: BoxIndex, grid: Grid, param
 
     ``item``: ``space``, ``floor``, ``cells`` (its cell ids in the building's
     parse) and ``tiles`` (the tiles holding it); with ``pieces`` (the
-    :func:`gather_tile` results of its tiles, in order) the points are not read again.  ``params`` is the stage's
+    :func:`gather_tile` results of its tiles, in order) the points are not read again;
+    ``pieces_points``: see :func:`_parse_part`.  ``params`` is the stage's
     :class:`engine.spaces.SpaceParams`.  When the space's walls follow two
     orientations (``refine_min_second``), it is split into the regions of each
     (:func:`frame_regions`) and each region is parsed in its own frame.
     """
     f = int(item["floor"])
+    pieces = int(item.get("pieces_points") or 0)
     if "pieces" in item:  # gathered by one task per tile (refine_spaces)
         raw = _joined(item["pieces"])
     else:
@@ -353,13 +447,13 @@ def refine_space(item: dict[str, Any], store, index: BoxIndex, grid: Grid, param
             out.regions = None
     if out.regions is None:
         yaw = space_yaw(xy, al, grid.frame.yaw, params.refine_snap_deg, evidence=ev)
-        out.parts = [_parse_part(mem, yaw, grid, params, f, floors, band_z)]
+        out.parts = [_parse_part(mem, yaw, grid, params, f, floors, band_z, pieces)]
         return out
     for k in range(2):
         sel = region == k
         sub = MemoryStore({a: raw[a][sel] for a in "xyz"}, m.scale, m.offset, origin)
         yaw = space_yaw(sub.xy_local(), al, grid.frame.yaw, params.refine_snap_deg)
-        out.parts.append(_parse_part(sub, yaw, grid, params, f, floors, band_z))
+        out.parts.append(_parse_part(sub, yaw, grid, params, f, floors, band_z, pieces))
     return out
 
 
@@ -370,12 +464,15 @@ def refine_spaces(items: list[dict[str, Any]], store, index: BoxIndex, grid: Gri
 
     A space's refinement is one long task (its points in memory, recursive
     slicing in its own frame), and the space stage waits for the last one:
-    with one large space, one worker parsed it while the others idled.  Two
+    with one large space, one worker parsed it while the others idled.  Three
     things shorten that wait without changing a result: the spaces start
-    largest (most bins) first, and the points of a space are read and located
-    in its tiles by tasks of their own, spread over the workers (a quarter of
-    the task's time on the medium ``bench_run`` building: 5.3 M points in 3
-    tiles), before the parse itself.  Without a client: one after another here.
+    largest (most bins) first; the points of a space are read and located in
+    its tiles by tasks of their own, spread over the workers (a quarter of the
+    task's time on the medium ``bench_run`` building: 5.3 M points in 3 tiles);
+    and the histogram passes of a space of at least
+    ``buildingparser.spaces.refine-pieces-points`` points run as tasks over
+    pieces of its points, one per worker thread (:class:`PieceStore`; most of
+    the rest of the task).  Without a client: one after another here.
     """
     from tiles.tasks import run_tasks
 
@@ -390,12 +487,26 @@ def refine_spaces(items: list[dict[str, Any]], store, index: BoxIndex, grid: Gri
     order = sorted(range(len(items)), key=lambda i: (-int(bins[np.asarray(items[i]["cells"], np.int64)].sum()), i))
     shared = share(client, index)
     retries = int(dask.config.get("buildingparser.retries", 2))
-    jobs = [dict(items[i]) for i in order]
-    for job in jobs:  # the pieces are futures: the refinement task waits for them and receives their data
-        job["pieces"] = client.map(gather_tile, [(t, job["cells"]) for t in job["tiles"]], store=store,
-                                   index=shared, grid=grid, pure=False, retries=retries)
+    from engine import config
+
+    pieces_points = int(config.get("spaces.refine-pieces-points") or 0)
+    jobs = [dict(items[i], pieces_points=pieces_points) for i in order]
+
+    def with_pieces(job: dict[str, Any]) -> dict[str, Any]:
+        """The job with its tiles' gather tasks as futures: the refinement task waits for them and receives
+        their data."""
+        pieces = client.map(gather_tile, [(t, job["cells"]) for t in job["tiles"]], store=store, index=shared,
+                            grid=grid, pure=False, retries=retries)
+        return dict(job, pieces=pieces)
+
+    # One refinement per worker thread at a time, its gathers submitted with it: a refinement whose passes
+    # run as tasks over pieces gives up its thread while it waits (worker_client), and with every job
+    # submitted at once the next refinements and their gathers would start in that thread, holding the
+    # points of many large spaces in memory together.
+    threads = sum(int(w.get("nthreads", 1)) for w in client.scheduler_info()["workers"].values())
     done = run_tasks(refine_space, jobs, client=client, label="spaces: refining large spaces",
-                     keys=[keys[i] for i in order], extra_args=(store, shared, grid, params, floors, band_z))
+                     keys=[keys[i] for i in order], extra_args=(store, shared, grid, params, floors, band_z),
+                     window=max(1, threads), prepare=with_pieces)
     out: list[Any] = [None] * len(items)
     for i, r in zip(order, done):
         out[i] = r

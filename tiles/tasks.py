@@ -60,7 +60,8 @@ class Progress:
 
 def run_tasks(fn: Callable[..., Any], items: Sequence[Any], *, client=None, label: str = "tasks",
               keys: Sequence[Any] | None = None, extra_args: tuple = (), raise_failures: bool = True,
-              resources: dict | None = None) -> list[Any]:
+              resources: dict | None = None, window: int | None = None,
+              prepare: Callable[[Any], Any] | None = None) -> list[Any]:
     """Run ``fn(item, *extra_args)`` for every item; results in item order.
 
     Parameters
@@ -75,6 +76,14 @@ def run_tasks(fn: Callable[..., Any], items: Sequence[Any], *, client=None, labe
         A readable key per item (tile name, space id) for failure reports.
     raise_failures
         If False, failed tasks give their exception as their result instead of raising.
+    window
+        At most this many tasks submitted at a time, the next one when one ends
+        (in item order): bounds what the batch holds in worker memory when each
+        task holds a lot (None: all at once).
+    prepare
+        With a client: called on the driver with an item just before its task is submitted; its
+        result is the task's argument (e.g. futures of the inputs it needs, made
+        only when the task is about to run).
 
     A :class:`tiles.errors.UserError` raised by a task is re-raised as it is (the
     first one), so a bad input found on a worker still reads as one clear line.
@@ -98,10 +107,26 @@ def run_tasks(fn: Callable[..., Any], items: Sequence[Any], *, client=None, labe
         from distributed import as_completed
 
         retries = int(dask.config.get("buildingparser.retries", 2))
-        futures = client.map(fn, items, *[[a] * len(items) for a in extra_args], retries=retries,
-                             pure=False, resources=resources)
+        if window is None and prepare is None:
+            futures = client.map(fn, items, *[[a] * len(items) for a in extra_args], retries=retries,
+                                 pure=False, resources=resources)
+            pending = iter(())
+        else:
+            def submit(i: int):
+                arg = prepare(items[i]) if prepare is not None else items[i]
+                return client.submit(fn, arg, *extra_args, retries=retries, pure=False, resources=resources)
+
+            first = len(items) if window is None else max(1, int(window))
+            futures = [submit(i) for i in range(min(first, len(items)))]
+            pending = iter(range(len(futures), len(items)))
         index = {f.key: i for i, f in enumerate(futures)}
-        for fut in as_completed(futures):
+        running = as_completed(futures)
+        for fut in running:
+            nxt = next(pending, None)
+            if nxt is not None:
+                futures.append(submit(nxt))
+                index[futures[-1].key] = nxt
+                running.add(futures[-1])
             i = index[fut.key]
             if fut.status == "error":
                 exc = fut.exception()

@@ -195,16 +195,28 @@ def winged(tmp_path_factory, client):
 
 @pytest.mark.slow
 def test_refinement_on_the_cluster_equals_the_serial_one(winged, client, monkeypatch):
-    """Refined spaces read by one task per tile, largest first, with the bins kept by the memory store, give
-    the parse of the serial refinement that reads each space in one go and computes the bins per pass."""
+    """Refined spaces read by one task per tile, largest first, their histogram passes run as tasks over
+    pieces of their points on the workers (refine-pieces-points), with the bins kept by the memory stores,
+    give the parse of the serial refinement that reads each space in one go and computes the bins per pass."""
+    import dask
+
     import engine.refine as refine
+    from distributed import get_task_stream
 
     def parsed():
         return ({k: v for k, v in p.to_doc().items() if k != "stats"},
                 [winged.read(t.name, ["cell_id", "space_id"]) for t in winged.tiles])
 
-    p = parse_spaces(winged, client=client)
+    def passes(stream) -> int:
+        return sum(str(t.get("key", "")).startswith(("segment_histograms", "edge_histograms")) for t in stream)
+
+    with dask.config.set({"buildingparser.spaces.refine-pieces-points": 0}), get_task_stream(client) as ts:
+        p = parse_spaces(winged, client=client)  # the refinements' passes in their own tasks
+    in_task = passes(ts.data)
+    with dask.config.set({"buildingparser.spaces.refine-pieces-points": 1}), get_task_stream(client) as ts:
+        p = parse_spaces(winged, client=client)
     assert p.stats["refined"], "the wing is refined"
+    assert passes(ts.data) > in_task  # the refinements' passes ran as tasks over pieces
     fast = parsed()
     monkeypatch.setattr(refine.MemoryStore, "cached_bins", None)  # Grid.tile_bins computes them every pass
     p = parse_spaces(winged, client=None)

@@ -1,0 +1,59 @@
+"""tiles.tasks.run_tasks: results in item order, failures by key, a window of tasks in flight."""
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from tiles.tasks import TaskFailures, run_tasks
+
+
+def _slow_square(x: int, pause: float) -> int:
+    time.sleep(pause)
+    return x * x
+
+
+def _fail_on_three(x: int) -> int:
+    if x == 3:
+        raise ValueError("three")
+    return x
+
+
+def test_results_come_in_item_order_serially_and_on_the_cluster(client):
+    items = [5, 1, 4, 2, 3]
+    assert run_tasks(_slow_square, items, extra_args=(0.0,)) == [25, 1, 16, 4, 9]
+    assert run_tasks(_slow_square, items, client=client, extra_args=(0.0,)) == [25, 1, 16, 4, 9]
+
+
+def test_a_failing_task_is_reported_by_its_key(client):
+    with pytest.raises(TaskFailures, match="item-3: ValueError: three"):
+        run_tasks(_fail_on_three, [1, 2, 3], client=client, keys=["item-1", "item-2", "item-3"])
+
+
+def test_a_window_of_one_runs_the_tasks_one_at_a_time_and_prepares_each_just_before(client):
+    """With ``window=1`` on a 2-worker cluster no two tasks overlap (without it they do), and ``prepare``
+    turns each item into its task's argument, once per item, in item order."""
+    from distributed import get_task_stream
+
+    def spans(stream):
+        return sorted((s["start"], s["stop"]) for t in stream for s in t["startstops"]
+                      if s["action"] == "compute")
+
+    def overlaps(intervals) -> int:
+        return sum(b[0] < a[1] for a, b in zip(intervals, intervals[1:]))
+
+    with get_task_stream(client) as ts:
+        assert run_tasks(_slow_square, [1, 2, 3, 4], client=client, extra_args=(0.3,)) == [1, 4, 9, 16]
+    assert overlaps(spans(ts.data)) > 0  # both workers busy at once: the check below can fail
+    prepared = []
+
+    def prepare(x: int) -> int:
+        prepared.append(x)
+        return x + 10
+
+    with get_task_stream(client) as ts:
+        got = run_tasks(_slow_square, [1, 2, 3, 4], client=client, extra_args=(0.3,), window=1, prepare=prepare)
+    assert got == [121, 144, 169, 196]
+    assert prepared == [1, 2, 3, 4]
+    intervals = spans(ts.data)
+    assert len(intervals) == 4 and overlaps(intervals) == 0
