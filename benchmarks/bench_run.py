@@ -93,16 +93,8 @@ class MemoryTrace(common.PeakMemory):
         self.samples: list[tuple[float, int, int]] = []
 
     def _loop(self) -> None:
-        import psutil
-
-        me = psutil.Process(os.getpid())
         while not self._stop.is_set():
-            rss = []
-            for p in [me, *me.children(recursive=True)]:
-                try:
-                    rss.append(p.memory_info().rss)
-                except psutil.Error:
-                    pass
+            rss = self.sample()
             if rss:
                 self.samples.append((time.perf_counter(), sum(rss), max(rss)))
                 self.peak_total, self.peak_single = max(self.peak_total, sum(rss)), max(self.peak_single, max(rss))

@@ -30,3 +30,23 @@ def test_slowdown_of_a_lower_is_better_ratio_is_flagged():
 def test_first_result_has_nothing_to_compare():
     rows = compare({"s.ari": {"value": 0.5, "kind": "quality", "better": "higher"}}, [])
     assert rows[0]["previous"] == "" and rows[0]["flag"] == ""
+
+
+def test_peak_memory_counts_children_and_finds_new_ones_after_its_refresh():
+    """The sampler sums this process and its children; a child started later is found within ``refresh``."""
+    import subprocess
+    import sys
+    import time
+
+    from benchmarks.common import PeakMemory
+
+    grow = "import time; b = bytearray(300 * 2**20); b[::4096] = b'x' * len(b[::4096]); time.sleep(3)"
+    with PeakMemory(interval=0.02, refresh=0.2) as mem:
+        time.sleep(0.3)
+        alone = mem.peak_total
+        child = subprocess.Popen([sys.executable, "-c", grow])
+        time.sleep(2.0)
+        child.kill()
+        child.wait()
+    assert mem.peak_single >= 300 * 2**20  # the child, found after the sampler started
+    assert mem.peak_total >= alone + 300 * 2**20
