@@ -28,3 +28,20 @@ def test_stage_profile_charges_tasks_and_cpu_to_the_stage_they_ran_in():
     assert (ingest["none_busy_s"], ingest["one_busy_s"], ingest["all_busy_s"]) == (1.0, 3.0, 1.0)
     assert spaces["task_s"] == 7.0 and spaces["none_busy_s"] == 2.0 and spaces["one_busy_s"] == 7.0
     assert rest["task_s"] == 0.0 and rest["none_busy_s"] == 1.0 and rest["driver_cpu_s"] == 1.0
+
+
+def test_scaling_summary_is_the_ratio_of_the_medians_of_interleaved_runs():
+    from benchmarks.bench_run import scaling_summary
+
+    one = scaling_summary([100.0], [60.0])
+    assert one["speedup_2_vs_1"] == pytest.approx(1.67) and "speedup_per_pair" not in one
+    many = scaling_summary([100.0, 120.0, 104.0], [60.0, 62.0, 58.0])  # medians 104 and 60
+    assert many["speedup_2_vs_1"] == pytest.approx(1.73)
+    assert many["speedup_per_pair"] == [1.67, 1.94, 1.79] and many["repeat"] == 3
+
+
+def test_repeat_must_be_a_positive_count():
+    from benchmarks.bench_run import run
+
+    with pytest.raises(ValueError, match="repeat"):
+        run(repeat=0)
