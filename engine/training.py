@@ -17,9 +17,12 @@ it touches), and only small arrays come back to the driver:
 4. **Linear SVMs**: one ``LinearSVC`` (liblinear) per class on the layout's columns.
 5. **Hard negatives** (bounded rounds): every space is scanned with the current
    detectors; windows overlapping no element of the class by ``neg-iou`` and
-   scoring above -1 (margin violators) that are not yet negatives are sampled
-   (seeded, ``hard-negatives`` per class and space) and the classes that got new
-   ones are retrained, until no class gets any or ``rounds`` is reached.
+   scoring above -1 (margin violators) that are not yet negatives are kept, at
+   most ``hard-negatives`` per class and space: the highest-scoring ones
+   (``mining: hardest``; a random subset left the worst false positives out of
+   training, see ``engine/detection.yaml``) or a seeded random subset
+   (``mining: random``, the older models), and the classes that got new ones
+   are retrained, until no class gets any or ``rounds`` is reached.
 
 Folds are buildings: :func:`cross_validate` trains on all buildings but one and
 evaluates on that one, for each, so no building is both trained and tested on.
@@ -77,6 +80,7 @@ class TrainSettings:
     max_instances: int = 400
     iou_weight: float = 0.5
     relative_ratio: float | None = None
+    mining: str = "random"
     disabled: tuple[str, ...] = ()
     classes: tuple[int, ...] = tuple(range(N_CLASSES))
     max_stride: float = 0.5
@@ -94,6 +98,8 @@ class TrainSettings:
         self.classes = tuple(int(c) for c in self.classes)
         if not self.classes or not all(0 <= c < N_CLASSES for c in self.classes):
             raise ValueError(f"classes must be element class codes 0..{N_CLASSES - 1}")
+        if self.mining not in ("random", "hardest"):
+            raise ValueError("mining must be 'random' or 'hardest'")
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "TrainSettings":
@@ -123,6 +129,7 @@ class TrainJob:
     key: int
     building: str
     frame: dict[str, Any] | None = None  # the space's canonical frame, once pass 1 has computed it
+    mined: dict[int, np.ndarray] | None = None  # per class, keys of this space's negatives mined so far
 
 
 @dataclass
@@ -245,7 +252,7 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
             continue
         mine = gt["cls"] == c
         rng = _rng(settings.seed, round_, job.key, c)
-        cand_lo, cand_hi, cand_keys, pos_lo, pos_hi = [], [], [], [], []
+        cand_lo, cand_hi, cand_keys, cand_scores, pos_lo, pos_hi = [], [], [], [], [], []
         for ai, atom in enumerate(model.dictionary.atoms_):
             if atom.class_code != c:
                 continue
@@ -255,11 +262,13 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
                 counts = mom.box_sums_grid(vol.iv[..., :1], np.stack([px, px + shape[0]], 1),
                                            np.stack([py, py + shape[1]], 1), np.stack([pz, pz + shape[2]], 1))[..., 0]
                 valid = counts >= det.min_window_points
+                scores = np.zeros(valid.shape)
             else:
                 ws = score_windows(vol, shape, model.weights[c], model.bias[c], lay, det.stride, det.min_window_points,
                                    det.max_stride)
                 px, py, pz = ws.px, ws.py, ws.pz
                 valid = ws.scores > -1.0
+                scores = ws.scores
             best = np.zeros(valid.shape)
             for g in np.nonzero(mine)[0]:
                 iou = grid_iou(shape, px, py, pz, gt_lo_v[g], gt_hi_v[g])
@@ -276,6 +285,14 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
                 i, j, k = np.unravel_index(neg, valid.shape)
                 l = np.stack([px[i], py[j], pz[k]], axis=1)
                 cand_lo.append(l), cand_hi.append(l + shape), cand_keys.append(_window_key(ai, l))
+                cand_scores.append(scores[i, j, k])
+        if cand_lo and round_ > 0 and settings.mining == "hardest" and job.mined and len(job.mined.get(c, ())):
+            # a violator mined in an earlier round is in the training set already: the next ones down
+            fresh = [~np.isin(kk, job.mined[c]) for kk in cand_keys]
+            cand_lo = [x[f] for x, f in zip(cand_lo, fresh)]
+            cand_hi = [x[f] for x, f in zip(cand_hi, fresh)]
+            cand_keys = [x[f] for x, f in zip(cand_keys, fresh)]
+            cand_scores = [x[f] for x, f in zip(cand_scores, fresh)]
         if pos_lo:
             lo, hi = np.concatenate(pos_lo), np.concatenate(pos_hi)
             out[c]["pos"].append(window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32))
@@ -283,7 +300,10 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
             lo, hi, keys = np.concatenate(cand_lo), np.concatenate(cand_hi), np.concatenate(cand_keys)
             n = settings.random_negatives if round_ == 0 else settings.hard_negatives
             if len(lo) > n:
-                pick = np.sort(rng.choice(len(lo), n, replace=False))
+                if round_ > 0 and settings.mining == "hardest":  # the n highest-scoring margin violators
+                    pick = np.sort(np.argsort(-np.concatenate(cand_scores), kind="stable")[:n])
+                else:
+                    pick = np.sort(rng.choice(len(lo), n, replace=False))
                 lo, hi, keys = lo[pick], hi[pick], keys[pick]
             if len(lo):
                 out[c]["neg"].append(window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32))
@@ -389,6 +409,13 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
     history = []
     active = tuple(c for c in range(N_CLASSES) if trained[c])
     for round_ in range(settings.rounds + 1):
+        if round_ > 0 and settings.mining == "hardest":
+            mined: dict[int, dict[int, list[int]]] = {j.key: {} for j in jobs}
+            for c in range(N_CLASSES):
+                for jk, kk in samples[c].keys:
+                    mined[jk].setdefault(c, []).append(kk)
+            jobs = [dataclasses.replace(j, mined={c: np.array(v, dtype=np.int64) for c, v in mined[j.key].items()})
+                    for j in jobs]
         res = run_tasks(_samples_task, jobs, client=client, label=f"training samples, round {round_}",
                         keys=[f"space {j.key}" for j in jobs], extra_args=(model, settings, round_, det, active))
         new = np.zeros(N_CLASSES, dtype=np.int64)
