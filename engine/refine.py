@@ -70,7 +70,7 @@ class MemoryStore:
     the refinement of a space makes one histogram pass over the same points per
     slicing level and one for its faces, all in the same frame, and computing the
     bins was about half of each pass (the medium bench_run building: 6 passes over
-    5.3 M points).  The refinement is one task that the other workers wait for.
+    5.3 M points).  On a cluster each piece of a :class:`PieceStore` keeps its own.
     """
 
     def __init__(self, raw: dict[str, np.ndarray], scale, offset, origin) -> None:
@@ -476,6 +476,7 @@ def refine_spaces(items: list[dict[str, Any]], store, index: BoxIndex, grid: Gri
     """
     from tiles.tasks import run_tasks
 
+    from engine import config
     from engine.histograms import share
 
     keys = [it["space"] for it in items]
@@ -487,8 +488,6 @@ def refine_spaces(items: list[dict[str, Any]], store, index: BoxIndex, grid: Gri
     order = sorted(range(len(items)), key=lambda i: (-int(bins[np.asarray(items[i]["cells"], np.int64)].sum()), i))
     shared = share(client, index)
     retries = int(dask.config.get("buildingparser.retries", 2))
-    from engine import config
-
     pieces_points = int(config.get("spaces.refine-pieces-points") or 0)
     jobs = [dict(items[i], pieces_points=pieces_points) for i in order]
 
