@@ -56,9 +56,9 @@ def window_candidates_many(vol: SpaceVolume, models: list[Model],
                 groups.setdefault(shape, []).append((mi, ai))
     out: list[dict[int, tuple[np.ndarray, ...]]] = [{} for _ in models]
     for shape, members in groups.items():
-        w = np.stack([models[mi].weights[m0.dictionary.atoms_[ai].class_code] * models[mi].layout.mask
-                      for mi, ai in members])
-        b = np.array([models[mi].bias[m0.dictionary.atoms_[ai].class_code] for mi, ai in members])
+        rows = [models[mi].window_weights([ai]) for mi, ai in members]
+        w = np.stack([r[0][0] * models[mi].layout.mask for r, (mi, _) in zip(rows, members)])
+        b = np.array([r[1][0] for r in rows])
         scored = score_windows_many(vol, np.array(shape), w, b, full, settings.stride, settings.min_window_points,
                                     settings.max_stride)
         for (mi, ai), ws in zip(members, scored):

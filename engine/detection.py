@@ -68,6 +68,7 @@ class DetectionSettings:
     nms_min_size: float = 0.3
     max_per_class: int = 30
     one_per_space: tuple[str, ...] = ("ceiling", "floor")
+    surface_halves: bool = True
     local_search: bool = True
     refine: bool = True
     refine_classes: tuple[str, ...] = ("ceiling", "floor", "wall")
@@ -207,9 +208,13 @@ def prepare_space(points: SpacePoints, model: Model, frame: CanonicalFrame | Non
 
 
 def local_search(vol: SpaceVolume, lo: np.ndarray, hi: np.ndarray, scores: np.ndarray, weights: np.ndarray,
-                 bias: float, layout, stride: float, max_stride: float | None) -> tuple[np.ndarray, np.ndarray,
-                                                                                          np.ndarray]:
+                 bias: np.ndarray | float, layout, stride: float, max_stride: float | None) -> tuple[np.ndarray,
+                                                                                                  np.ndarray,
+                                                                                                  np.ndarray]:
     """Move each detection by half a sliding step along each axis (27 candidates) to its best score.
+
+    ``weights`` is ``(D,)`` for all detections or ``(n, D)`` one row per detection (its window's,
+    :meth:`engine.model.Model.window_weights`), ``bias`` a scalar or ``(n,)``.
 
     The coarse grid places a window up to half a step off; its score is highest
     where it fits, so the best of the half-step neighbours is kept (the window's
@@ -229,7 +234,9 @@ def local_search(vol: SpaceVolume, lo: np.ndarray, hi: np.ndarray, scores: np.nd
     cand_hi = cand_lo + w[:, None, :]
     flat_lo, flat_hi = cand_lo.reshape(-1, 3), cand_hi.reshape(-1, 3)
     feats = window_features(vol.iv, vol.grid, flat_lo, flat_hi, layout)
-    cand = (feats @ np.where(layout.mask, weights, 0.0) + bias).reshape(len(lo), -1)
+    w_rows = np.broadcast_to(np.where(layout.mask, weights, 0.0), (len(lo), layout.size))
+    b_rows = np.broadcast_to(np.asarray(bias, dtype=np.float64), (len(lo),))
+    cand = np.einsum("ncd,nd->nc", feats.reshape(len(lo), len(offs), -1), w_rows) + b_rows[:, None]
     best = np.argmax(cand, axis=1)
     idx = np.arange(len(lo))
     better = cand[idx, best] > scores
@@ -269,9 +276,8 @@ def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSetting
             groups.setdefault(tuple(int(v) for v in shape), []).append(ai)
     out: dict[int, tuple[np.ndarray, ...]] = {}
     for shape, members in groups.items():
-        codes = [model.dictionary.atoms_[ai].class_code for ai in members]
-        scored = score_windows_many(vol, np.array(shape), np.stack([model.weights[c] for c in codes]),
-                                    np.array([model.bias[c] for c in codes]), model.layout, settings.stride,
+        w, b = model.window_weights(members)
+        scored = score_windows_many(vol, np.array(shape), w, b, model.layout, settings.stride,
                                     settings.min_window_points, settings.max_stride)
         for ai, ws in zip(members, scored):
             top = top_windows(ws, ai, settings)
@@ -316,11 +322,13 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         if settings.local_search:
             lo, hi, sc = lo[keep], hi[keep], sc[keep]
             at = at[keep]
-            lo, hi, sc = local_search(vol, lo, hi, sc, model.weights[c], model.bias[c], model.layout,
-                                      settings.stride, settings.max_stride)
+            w, b = model.window_weights(at)
+            lo, hi, sc = local_search(vol, lo, hi, sc, w, b, model.layout, settings.stride, settings.max_stride)
             pad = np.clip(np.ceil(settings.nms_min_size / grid.voxel) - (hi - lo), 0, None) / 2.0
             keep = non_maximum_suppression(lo - pad, hi + pad, sc, settings.nms_iou, settings.max_per_class)
         if ELEMENT_CLASSES[c] in settings.one_per_space:
+            if settings.surface_halves and ELEMENT_CLASSES[c] in ("ceiling", "floor"):
+                keep = _in_own_half(keep, lo, hi, grid.shape[2], upper=ELEMENT_CLASSES[c] == "ceiling")
             keep = keep[:1]  # a space has one floor and one ceiling: the best window of the class
         lo_all.append(lo[keep]), hi_all.append(hi[keep]), sc_all.append(sc[keep])
         cl_all.append(np.full(len(keep), c)), at_all.append(at[keep])
@@ -356,8 +364,16 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                 pts = index.points_in(lo[i], hi[i])
                 lo_m[i, a], hi_m[i, a] = refine_extent(pts[:, a], lo_m[i, a], hi_m[i, a], settings.refine_bin)
     if settings.refine and index is not None:
-        refine_reveals(lo, hi, lo_m, hi_m, np.concatenate(cl_all), grid, index)  # doors, boards: depth of points
+        refine_reveals(lo, hi, lo_m, hi_m, np.concatenate(cl_all), grid, index)  # doors' depth, columns' sides
     return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), np.concatenate(cl_all), at_all_cat)
+
+
+def _in_own_half(keep: np.ndarray, lo: np.ndarray, hi: np.ndarray, nz: int, upper: bool) -> np.ndarray:
+    """The windows of ``keep`` whose middle lies in the upper (ceilings) or lower (floors) half of the space's
+    height; all of them if none does."""
+    mid = (lo[keep, 2] + hi[keep, 2]) / 2.0
+    ok = mid >= nz / 2.0 if upper else mid <= nz / 2.0
+    return keep[ok] if ok.any() else keep
 
 
 def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,

@@ -12,11 +12,14 @@
     atom_relative     bool    (A, 3)      per axis: the size follows the space (unit cube) rather than metres
     atom_occupancy    bool    (A, K, K, K) occupancy pattern B (cell-wise mode of the cluster)
     atom_members      int64   (A,)        training instances in the window's cluster
+    atom_weights      float64 (A, D)      optional (version 2): each window's own part of its class's SVM; a
+                                          window of atom a scores with weights[class] + atom_weights[a]
+    atom_bias         float64 (A,)        optional (version 2): each window's own part of the intercept
     crf_*             any                 the CRF's arrays (engine.crf.CRFWeights.to_arrays), stored as given
 
 ``<stem>.json``::
 
-    {"format": "buildingparser-detector", "version": 1, "classes": [...12 names...],
+    {"format": "buildingparser-detector", "version": 1 (2 with atom_weights), "classes": [...12 names...],
      "layout": FeatureLayout.to_json(), "voxel": metres, "max_cells": int, "stride": fraction,
      "detection": {...the detection settings the model was trained with...},
      "dictionary": WindowDictionary.params(), "svm": {...}, "provenance": {...}, "cv": {...} | null,
@@ -40,7 +43,8 @@ from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
 
 FORMAT = "buildingparser-detector"
-VERSION = 1
+#: The newest version this code reads; a model is written as version 1 unless it has per-window weights.
+VERSION = 2
 ARRAY_DOCS = {
     "weights": "float64 (12, D): linear SVM weights per element class, zero on disabled feature groups",
     "bias": "float64 (12,): SVM intercept per class",
@@ -51,6 +55,8 @@ ARRAY_DOCS = {
     "atom_relative": "bool (A, 3): per axis, the size follows the space (unit cube) instead of metres",
     "atom_occupancy": "bool (A, K, K, K): occupancy pattern (cell-wise mode of the cluster)",
     "atom_members": "int64 (A,): training instances in the window's cluster",
+    "atom_weights": "float64 (A, D): each window's own part of its class's SVM weights (added to weights[class])",
+    "atom_bias": "float64 (A,): each window's own part of its class's SVM intercept (added to bias[class])",
 }
 
 
@@ -65,7 +71,12 @@ def model_stem(path: str | os.PathLike) -> str:
 
 @dataclass
 class Model:
-    """A trained element detector: feature layout, window dictionary, one linear SVM per class."""
+    """A trained element detector: feature layout, window dictionary, one linear SVM per class.
+
+    A window (dictionary atom) ``a`` of class ``c`` scores with ``weights[c] + atom_weights[a]`` and
+    ``bias[c] + atom_bias[a]`` (:meth:`window_weights`): the class's shared SVM plus the window's own
+    part, learnt jointly (``detection.train.atom-weights``); models without them have zeros there.
+    """
 
     layout: FeatureLayout
     dictionary: WindowDictionary
@@ -81,6 +92,8 @@ class Model:
     cv: dict[str, Any] | None = None
     crf: dict[str, Any] | None = None
     crf_arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    atom_weights: np.ndarray | None = None  # (A, D)
+    atom_bias: np.ndarray | None = None  # (A,)
 
     def __post_init__(self) -> None:
         self.weights = np.asarray(self.weights, dtype=np.float64)
@@ -93,12 +106,32 @@ class Model:
             raise ValueError("bias and trained need one value per element class")
         if self.dictionary.k != self.layout.k:
             raise ValueError("dictionary and feature layout disagree on K")
+        n_atoms = len(self.dictionary.atoms_)
+        if (self.atom_weights is None) != (self.atom_bias is None):
+            raise ValueError("atom_weights and atom_bias go together")
+        if self.atom_weights is not None:
+            self.atom_weights = np.asarray(self.atom_weights, dtype=np.float64)
+            self.atom_bias = np.asarray(self.atom_bias, dtype=np.float64)
+            if self.atom_weights.shape != (n_atoms, self.layout.size) or self.atom_bias.shape != (n_atoms,):
+                raise ValueError(f"atom weights of shape {self.atom_weights.shape} and bias {self.atom_bias.shape}, "
+                                 f"expected {(n_atoms, self.layout.size)} and {(n_atoms,)}")
         bad = [k for k in self.crf_arrays if not k.startswith("crf_")]
         if bad:
             raise ValueError(f"CRF arrays must be named crf_*: {bad}")
 
+    def window_weights(self, atoms) -> tuple[np.ndarray, np.ndarray]:
+        """SVM weights ``(n, D)`` and intercepts ``(n,)`` that windows of dictionary atoms ``atoms`` score with."""
+        atoms = np.asarray(atoms, dtype=np.int64).reshape(-1)
+        codes = np.array([self.dictionary.atoms_[a].class_code for a in atoms], dtype=np.int64)
+        w, b = self.weights[codes], self.bias[codes]
+        if self.atom_weights is not None:
+            w, b = w + self.atom_weights[atoms], b + self.atom_bias[atoms]
+        return w, b
+
     def arrays(self) -> dict[str, np.ndarray]:
         out = {"weights": self.weights, "bias": self.bias, "trained": self.trained}
+        if self.atom_weights is not None:
+            out.update(atom_weights=self.atom_weights, atom_bias=self.atom_bias)
         out.update(self.dictionary.to_arrays())
         out.update(self.crf_arrays)
         return out
@@ -106,7 +139,9 @@ class Model:
     def params(self) -> dict[str, Any]:
         docs = dict(ARRAY_DOCS)
         docs.update({k: "CRF array (engine.crf)" for k in self.crf_arrays})
-        return {"format": FORMAT, "version": VERSION, "classes": list(ELEMENT_CLASSES),
+        if self.atom_weights is None:
+            docs = {k: v for k, v in docs.items() if not k.startswith("atom_weights") and k != "atom_bias"}
+        return {"format": FORMAT, "version": 1 if self.atom_weights is None else 2, "classes": list(ELEMENT_CLASSES),
                 "layout": self.layout.to_json(), "voxel": self.voxel, "max_cells": self.max_cells,
                 "stride": self.stride, "detection": self.detection, "dictionary": self.dictionary.params(),
                 "svm": self.svm, "provenance": self.provenance, "cv": self.cv, "crf": self.crf, "arrays": docs}
@@ -155,7 +190,8 @@ class Model:
                        stride=float(params["stride"]), detection=params.get("detection", {}),
                        svm=params.get("svm", {}), provenance=params.get("provenance", {}), cv=params.get("cv"),
                        crf=params.get("crf"),
-                       crf_arrays={k: v for k, v in arrays.items() if k.startswith("crf_")})
+                       crf_arrays={k: v for k, v in arrays.items() if k.startswith("crf_")},
+                       atom_weights=arrays.get("atom_weights"), atom_bias=arrays.get("atom_bias"))
         except (KeyError, ValueError) as exc:
             raise UserError(stem + ".npz", f"incomplete or inconsistent model ({exc})") from None
 

@@ -15,7 +15,14 @@ jambs behind the wall face, the casing and the leaf of a door; the board and
 nothing behind it.  The box never shrinks below half its voxel depth, and its
 position along the wall, its height and its score are unchanged.
 
-Settings: ``buildingparser.detection.reveal-*`` (``engine/detection.yaml``).  On for doors
+Solid elements (``solid-classes``: columns) get their horizontal extent the same
+way along both horizontal axes, but a side moves only where the points stop
+inside the grown box (a face); where they run on to within ``solid-edge`` of its
+edge, a surface continues there (the wall a pilaster stands against) and the
+window's side stays.  A 10 cm grid places a 25-35 cm column's sides to a voxel:
+on held-out generated buildings, column AP 13.6 -> 20.0 and 13.9 -> 24.0.
+
+Settings: ``buildingparser.detection.reveal-*`` and ``solid-*`` (``engine/detection.yaml``).  On for doors
 only: on held-out generated buildings it raised door AP from 0.7 to 6.1 and did
 not help boards (0.1 to 0) or windows (62.6 to 59.2; a window's sill board and
 frame are not its reveal's depth).
@@ -39,31 +46,43 @@ class RevealSettings:
     grow: float = 0.1
     quantile: float = 0.01
     thin_voxels: int = 2
+    solid_classes: tuple[str, ...] = ()
+    solid_edge: float = 0.02
 
     def __post_init__(self) -> None:
-        v = self.classes
-        v = tuple(c.strip() for c in v.split(",") if c.strip()) if isinstance(v, str) else tuple(v)
-        bad = [c for c in v if c not in ELEMENT_CLASSES]
-        if bad:
-            raise ValueError(f"reveal-classes: unknown element class(es) {', '.join(bad)}")
-        self.classes = v
-        if self.grow < 0 or not 0 <= self.quantile < 0.5 or self.thin_voxels < 0:
-            raise ValueError("need reveal-grow >= 0, 0 <= reveal-quantile < 0.5, thin-voxels >= 0")
+        self.classes = _class_list(self.classes, "reveal-classes")
+        self.solid_classes = _class_list(self.solid_classes, "solid-classes")
+        if self.grow < 0 or not 0 <= self.quantile < 0.5 or self.thin_voxels < 0 or self.solid_edge < 0:
+            raise ValueError("need reveal-grow >= 0, 0 <= reveal-quantile < 0.5, thin-voxels >= 0, solid-edge >= 0")
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "RevealSettings":
         kw: dict[str, Any] = {}
         for name, key in (("classes", "reveal-classes"), ("grow", "reveal-grow"), ("quantile", "reveal-quantile"),
-                          ("thin_voxels", "reveal-thin-voxels")):
+                          ("thin_voxels", "reveal-thin-voxels"), ("solid_classes", "solid-classes"),
+                          ("solid_edge", "solid-edge")):
             v = config.get(f"detection.{key}")
             if v is not None:
-                kw[name] = v if name == "classes" else type(getattr(cls, name))(v)
+                kw[name] = v if name.endswith("classes") else type(getattr(cls, name))(v)
         kw.update(overrides)
         return cls(**kw)
 
     @property
     def codes(self) -> list[int]:
         return [ELEMENT_CLASSES.index(c) for c in self.classes]
+
+    @property
+    def solid_codes(self) -> list[int]:
+        return [ELEMENT_CLASSES.index(c) for c in self.solid_classes]
+
+
+def _class_list(v: Any, key: str) -> tuple[str, ...]:
+    """Element class names from a comma-separated string or a sequence; unknown names are a ValueError."""
+    v = tuple(c.strip() for c in v.split(",") if c.strip()) if isinstance(v, str) else tuple(v or ())
+    bad = [c for c in v if c not in ELEMENT_CLASSES]
+    if bad:
+        raise ValueError(f"{key}: unknown element class(es) {', '.join(bad)}")
+    return v
 
 
 def point_span(values: np.ndarray, lo: float, hi: float, quantile: float, min_size: float) -> tuple[float, float]:
@@ -79,7 +98,8 @@ def point_span(values: np.ndarray, lo: float, hi: float, quantile: float, min_si
 
 def refine_reveals(lo: np.ndarray, hi: np.ndarray, lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
                    grid: Any, index: Any, settings: RevealSettings | None = None) -> None:
-    """Set in place the depth (``lo_m``, ``hi_m``, canonical metres) of thin detections of the reveal classes.
+    """Set in place the depth (``lo_m``, ``hi_m``, canonical metres) of thin detections of the reveal classes,
+    and the horizontal sides of detections of the solid classes.
 
     Parameters
     ----------
@@ -95,7 +115,7 @@ def refine_reveals(lo: np.ndarray, hi: np.ndarray, lo_m: np.ndarray, hi_m: np.nd
         Default: :meth:`RevealSettings.from_config`.
     """
     settings = settings or RevealSettings.from_config()
-    if not settings.classes or not len(class_code):
+    if not len(class_code):
         return
     vox = np.asarray(grid.voxel)
     n = np.asarray(grid.shape)
@@ -103,10 +123,32 @@ def refine_reveals(lo: np.ndarray, hi: np.ndarray, lo_m: np.ndarray, hi_m: np.nd
         for a in (0, 1):  # horizontal axes: the wall's normal
             if hi[i, a] - lo[i, a] > settings.thin_voxels or hi[i, a] - lo[i, a] >= n[a]:
                 continue
-            g = int(np.ceil(settings.grow / vox[a] - 1e-9))
-            blo, bhi = lo[i].copy(), hi[i].copy()
-            blo[a], bhi[a] = max(lo[i, a] - g, 0), min(hi[i, a] + g, n[a])
-            if bhi[2] - blo[2] >= 3:  # not the bottom and top layers: the floor in front, the ceiling
-                blo[2], bhi[2] = blo[2] + 1, bhi[2] - 1
+            blo, bhi = _grown(lo[i], hi[i], a, settings.grow, vox, n)
             pts = index.points_in(blo, bhi)[:, a]
             lo_m[i, a], hi_m[i, a] = point_span(pts, lo_m[i, a], hi_m[i, a], settings.quantile, 0.5 * vox[a])
+    for i in np.nonzero(np.isin(class_code, settings.solid_codes))[0]:
+        for a in (0, 1):
+            if hi[i, a] - lo[i, a] >= n[a]:
+                continue
+            blo, bhi = _grown(lo[i], hi[i], a, settings.grow, vox, n)
+            pts = index.points_in(blo, bhi)[:, a]
+            if len(pts) < 3:
+                continue
+            qa, qb = (float(x) for x in np.quantile(pts, [settings.quantile, 1.0 - settings.quantile]))
+            # a side moves only where the points stop inside the grown box: else a surface runs on
+            a_lo = qa if qa > blo[a] * vox[a] + settings.solid_edge else lo_m[i, a]
+            a_hi = qb if qb < bhi[a] * vox[a] - settings.solid_edge else hi_m[i, a]
+            if a_hi - a_lo >= 0.5 * vox[a]:
+                lo_m[i, a], hi_m[i, a] = a_lo, a_hi
+
+
+def _grown(lo: np.ndarray, hi: np.ndarray, a: int, grow: float, vox: np.ndarray,
+           n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A voxel box grown by ``grow`` metres along axis ``a`` (within the grid), without its bottom and top
+    voxel layers when it has three or more (the floor in front, the ceiling)."""
+    g = int(np.ceil(grow / vox[a] - 1e-9))
+    blo, bhi = lo.copy(), hi.copy()
+    blo[a], bhi[a] = max(lo[a] - g, 0), min(hi[a] + g, n[a])
+    if bhi[2] - blo[2] >= 3:
+        blo[2], bhi[2] = blo[2] + 1, bhi[2] - 1
+    return blo, bhi

@@ -81,6 +81,8 @@ class TrainSettings:
     iou_weight: float = 0.5
     relative_ratio: float | None = None
     mining: str = "random"
+    atom_weights: bool = False
+    atom_scale: float = 1.0
     disabled: tuple[str, ...] = ()
     classes: tuple[int, ...] = tuple(range(N_CLASSES))
     max_stride: float = 0.5
@@ -100,6 +102,8 @@ class TrainSettings:
             raise ValueError(f"classes must be element class codes 0..{N_CLASSES - 1}")
         if self.mining not in ("random", "hardest"):
             raise ValueError("mining must be 'random' or 'hardest'")
+        if self.atom_scale <= 0:
+            raise ValueError("atom-scale must be positive")
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "TrainSettings":
@@ -111,7 +115,8 @@ class TrainSettings:
             v = config.get(f"detection.{key}") if f.name in ("k", "voxel", "max_cells") else \
                 config.get(f"detection.train.{key}")
             if v is not None:
-                kw[f.name] = float(v) if f.name == "relative_ratio" else type(f.default)(v)
+                kw[f.name] = float(v) if f.name == "relative_ratio" else \
+                    _as_bool(v) if isinstance(f.default, bool) else type(f.default)(v)
         kw.update(overrides)
         return cls(**kw)
 
@@ -134,14 +139,23 @@ class TrainJob:
 
 @dataclass
 class Samples:
-    """Training vectors of one class: positives, negatives and the keys of the mined windows."""
+    """Training vectors of one class: positives, negatives, the window (atom) of each, the mined windows' keys."""
 
     pos: list[np.ndarray] = field(default_factory=list)
     neg: list[np.ndarray] = field(default_factory=list)
     keys: set[tuple[int, int]] = field(default_factory=set)
+    pos_atom: list[np.ndarray] = field(default_factory=list)
+    neg_atom: list[np.ndarray] = field(default_factory=list)
 
     def n_neg(self) -> int:
         return int(sum(len(x) for x in self.neg))
+
+
+def _as_bool(v: Any) -> bool:
+    """A boolean setting (YAML gives bools; environment variables give strings)."""
+    if isinstance(v, str):
+        return v.strip().lower() in ("1", "true", "yes", "on")
+    return bool(v)
 
 
 # -- jobs -----------------------------------------------------------------------------------
@@ -238,21 +252,23 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
     vox = vol.grid.voxel
     gt_lo_v, gt_hi_v = gt["lo"] / vox, gt["hi"] / vox
     lay = model.layout
-    out: dict[int, dict[str, list]] = {c: {"pos": [], "neg": [], "keys": []} for c in range(N_CLASSES)}
+    out: dict[int, dict[str, list]] = {c: {"pos": [], "neg": [], "keys": [], "pos_atom": [], "neg_atom": []}
+                                       for c in range(N_CLASSES)}
     if round_ == 0 and usable.any():
         lo, hi = vol.voxel_box(gt["lo"][usable] / vol.frame.extent,
                                (gt["hi"][usable] - gt["lo"][usable]) / vol.frame.extent)
         feats = window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32)
         cls = gt["cls"][usable]
         for c in range(N_CLASSES):
-            out[c]["pos"].append(feats[cls == c])
-            out[c]["neg"].append(feats[cls != c])
+            near = _nearest_atoms((hi - lo) * vox, model, c, vol)
+            out[c]["pos"].append(feats[cls == c]), out[c]["pos_atom"].append(near[cls == c])
+            out[c]["neg"].append(feats[cls != c]), out[c]["neg_atom"].append(near[cls != c])
     for c in range(N_CLASSES):
         if c not in active:
             continue
         mine = gt["cls"] == c
         rng = _rng(settings.seed, round_, job.key, c)
-        cand_lo, cand_hi, cand_keys, cand_scores, pos_lo, pos_hi = [], [], [], [], [], []
+        cand_lo, cand_hi, cand_keys, cand_scores, pos_lo, pos_hi, pos_at = [], [], [], [], [], [], []
         for ai, atom in enumerate(model.dictionary.atoms_):
             if atom.class_code != c:
                 continue
@@ -264,7 +280,8 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
                 valid = counts >= det.min_window_points
                 scores = np.zeros(valid.shape)
             else:
-                ws = score_windows(vol, shape, model.weights[c], model.bias[c], lay, det.stride, det.min_window_points,
+                w, b = model.window_weights([ai])
+                ws = score_windows(vol, shape, w[0], float(b[0]), lay, det.stride, det.min_window_points,
                                    det.max_stride)
                 px, py, pz = ws.px, ws.py, ws.pz
                 valid = ws.scores > -1.0
@@ -279,7 +296,7 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
                         pick = rng.choice(good, min(len(good), settings.jitter_positives), replace=False)
                         i, j, k = np.unravel_index(pick, valid.shape)
                         l = np.stack([px[i], py[j], pz[k]], axis=1)
-                        pos_lo.append(l), pos_hi.append(l + shape)
+                        pos_lo.append(l), pos_hi.append(l + shape), pos_at.append(np.full(len(l), ai))
             neg = np.nonzero((valid & (best < settings.neg_iou)).ravel())[0]
             if len(neg):
                 i, j, k = np.unravel_index(neg, valid.shape)
@@ -296,6 +313,7 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
         if pos_lo:
             lo, hi = np.concatenate(pos_lo), np.concatenate(pos_hi)
             out[c]["pos"].append(window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32))
+            out[c]["pos_atom"].append(np.concatenate(pos_at))
         if cand_lo:
             lo, hi, keys = np.concatenate(cand_lo), np.concatenate(cand_hi), np.concatenate(cand_keys)
             n = settings.random_negatives if round_ == 0 else settings.hard_negatives
@@ -308,25 +326,94 @@ def _samples_task(job: TrainJob, model: Model, settings: TrainSettings, round_: 
             if len(lo):
                 out[c]["neg"].append(window_features(vol.iv, vol.grid, lo, hi, lay).astype(np.float32))
                 out[c]["keys"].append(keys)
+                out[c]["neg_atom"].append(keys >> 48)
     d = lay.size
     return {c: {"pos": np.concatenate(v["pos"]) if v["pos"] else np.zeros((0, d), np.float32),
                 "neg": np.concatenate(v["neg"]) if v["neg"] else np.zeros((0, d), np.float32),
-                "keys": np.concatenate(v["keys"]) if v["keys"] else np.zeros(0, np.int64)}
+                "keys": np.concatenate(v["keys"]) if v["keys"] else np.zeros(0, np.int64),
+                "pos_atom": np.concatenate(v["pos_atom"]).astype(np.int64) if v["pos_atom"] else np.zeros(0, np.int64),
+                "neg_atom": np.concatenate(v["neg_atom"]).astype(np.int64) if v["neg_atom"] else np.zeros(0, np.int64)}
             for c, v in out.items()}
 
 
-def _fit_svm(pos: np.ndarray, neg: np.ndarray, mask: np.ndarray, c: float, seed: int) -> tuple[np.ndarray, float]:
-    """One linear SVM on the layout's active columns; returns full-layout weights and bias."""
+def _nearest_atoms(sizes: np.ndarray, model: Model, c: int, vol: SpaceVolume) -> np.ndarray:
+    """Per box size (metres), the window of class ``c`` in this space whose size overlaps it most (-1: none).
+
+    Centred boxes' IoU: a ground-truth window is a sample of the atom it most resembles.
+    """
+    atoms = [ai for ai, a in enumerate(model.dictionary.atoms_) if a.class_code == c]
+    if not atoms or not len(sizes):
+        return np.full(len(sizes), -1, dtype=np.int64)
+    win = np.array([window_shape(model.dictionary.atoms_[ai].size_in(vol.grid.extent), vol.grid) * vol.grid.voxel
+                    for ai in atoms])
+    inter = np.prod(np.minimum(sizes[:, None, :], win[None]), axis=2)
+    iou = inter / (np.prod(sizes, axis=1)[:, None] + np.prod(win, axis=1)[None] - inter)
+    return np.asarray(atoms, dtype=np.int64)[np.argmax(iou, axis=1)]
+
+
+@dataclass
+class SVMFit:
+    """One class's fitted SVM: shared weights and intercept, and per window (atom) its own part."""
+
+    weights: np.ndarray  # (D,) full layout
+    bias: float
+    atom_weights: dict[int, np.ndarray] = field(default_factory=dict)  # atom index -> (D,)
+    atom_bias: dict[int, float] = field(default_factory=dict)
+
+
+def _fit_svm(pos: np.ndarray, neg: np.ndarray, mask: np.ndarray, c: float, seed: int,
+             atoms: tuple[np.ndarray, np.ndarray] | None = None, atom_scale: float = 1.0) -> SVMFit:
+    """One linear SVM on the layout's active columns; returns full-layout weights and bias.
+
+    With ``atoms`` (the window of each positive and negative, -1 for none) the SVM is one
+    liblinear problem over ``[x, atom_scale * x (x) e_a, atom_scale * e_a]``: weights shared by
+    the class plus each window's own weights and intercept, learnt jointly (the shared part is
+    what windows have in common, the window's own part what only its shape shows: an open
+    door's leaf, a low bookcase's top).  A window's score is then the sum of both parts, all
+    in one margin, so scores of different windows stay comparable.  ``atom_scale`` weighs the
+    windows' own parts against the shared one in the regulariser (larger: freer windows).
+    """
     x = np.concatenate([pos, neg])[:, mask].astype(np.float64)
     y = np.concatenate([np.ones(len(pos)), -np.ones(len(neg))])
     svm = LinearSVC(C=c, class_weight="balanced", loss="squared_hinge", dual="auto", max_iter=5000,
                     random_state=seed)
+    ids = np.zeros(0, dtype=np.int64)
+    if atoms is not None:
+        at = np.concatenate(atoms).astype(np.int64)
+        ids = np.unique(at[at >= 0])
+    if len(ids):
+        x_fit = _atom_design(x, at, ids, atom_scale)
+    else:
+        x_fit = x
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        svm.fit(x, y)
+        svm.fit(x_fit, y)
+    d = int(mask.sum())
+    coef = svm.coef_[0]
     w = np.zeros(len(mask))
-    w[mask] = svm.coef_[0]
-    return w, float(svm.intercept_[0])
+    w[mask] = coef[:d]
+    out = SVMFit(w, float(svm.intercept_[0]))
+    for j, a in enumerate(ids.tolist()):
+        block = coef[d + j * (d + 1): d + (j + 1) * (d + 1)] * atom_scale
+        wa = np.zeros(len(mask))
+        wa[mask] = block[:d]
+        out.atom_weights[a], out.atom_bias[a] = wa, float(block[d])
+    return out
+
+
+def _atom_design(x: np.ndarray, atom: np.ndarray, ids: np.ndarray, scale: float):
+    """Sparse ``[x, scale * x (x) e_a, scale * e_a]``: each row's features again in its window's block."""
+    import scipy.sparse as sp
+
+    n, d = x.shape
+    block = np.searchsorted(ids, atom)
+    has = (atom >= 0)
+    rows = np.nonzero(has)[0]
+    cols = (block[rows] * (d + 1))[:, None] + np.arange(d + 1)[None]
+    vals = np.concatenate([x[rows], np.ones((len(rows), 1))], axis=1) * scale
+    own = sp.csr_matrix((vals.ravel(), cols.ravel(), np.concatenate([[0], np.cumsum(has * (d + 1))])),
+                        shape=(n, len(ids) * (d + 1)))
+    return sp.hstack([sp.csr_matrix(x), own], format="csr")
 
 
 # -- training ---------------------------------------------------------------------------------
@@ -423,30 +510,34 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
             for c in range(N_CLASSES):
                 s = samples[c]
                 if len(r[c]["pos"]):
-                    s.pos.append(r[c]["pos"])
-                neg, keys = r[c]["neg"], r[c]["keys"]
+                    s.pos.append(r[c]["pos"]), s.pos_atom.append(r[c]["pos_atom"])
+                neg, keys, neg_atom = r[c]["neg"], r[c]["keys"], r[c]["neg_atom"]
                 if round_ == 0 and len(neg) > len(keys):  # other classes' elements come first, keyless
-                    s.neg.append(neg[:len(neg) - len(keys)])
-                    neg = neg[len(neg) - len(keys):]
+                    s.neg.append(neg[:len(neg) - len(keys)]), s.neg_atom.append(neg_atom[:len(neg) - len(keys)])
+                    neg, neg_atom = neg[len(neg) - len(keys):], neg_atom[len(neg) - len(keys):]
                 fresh = [i for i, kk in enumerate(keys.tolist()) if (job.key, kk) not in s.keys]
                 if fresh and s.n_neg() < settings.max_negatives:
                     s.keys.update((job.key, keys[i]) for i in fresh)
-                    s.neg.append(neg[fresh])
+                    s.neg.append(neg[fresh]), s.neg_atom.append(neg_atom[fresh])
                     new[c] += len(fresh)
         weights, bias = model.weights.copy(), model.bias.copy()
+        atom_w, atom_b = (model.atom_weights.copy(), model.atom_bias.copy()) if model.atom_weights is not None else \
+            (np.zeros((len(dictionary.atoms_), layout.size)), np.zeros(len(dictionary.atoms_)))
         for c in range(N_CLASSES):
             s = samples[c]
             if not trained[c]:
                 continue
-            pos = np.concatenate(s.pos) if s.pos else np.zeros((0, layout.size), np.float32)
-            neg = np.concatenate(s.neg) if s.neg else np.zeros((0, layout.size), np.float32)
-            if not len(pos) or not len(neg):
+            if not s.pos or not s.neg:
                 trained[c] = False
                 continue
             if round_ == 0 or new[c]:
-                weights[c], bias[c] = _fit_svm(pos, neg, mask, settings.c, settings.seed)
+                fit = _fit_class(s, mask, settings)
+                weights[c], bias[c] = fit.weights, fit.bias
+                for a in [i for i, at in enumerate(dictionary.atoms_) if at.class_code == c]:
+                    atom_w[a], atom_b[a] = fit.atom_weights.get(a, 0.0), fit.atom_bias.get(a, 0.0)
         model = Model(layout, dictionary, weights, bias, trained, voxel=settings.voxel,
-                      max_cells=settings.max_cells, stride=det.stride)
+                      max_cells=settings.max_cells, stride=det.stride,
+                      **({"atom_weights": atom_w, "atom_bias": atom_b} if settings.atom_weights else {}))
         history.append({"round": round_, "new_negatives": new.tolist(),
                         "positives": [int(sum(len(x) for x in samples[c].pos)) for c in range(N_CLASSES)],
                         "negatives": [samples[c].n_neg() for c in range(N_CLASSES)]})
@@ -457,13 +548,21 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
             break
     model.detection = det_run.to_json()
     model.svm = {"estimator": "sklearn.svm.LinearSVC (liblinear)", "C": settings.c, "class_weight": "balanced",
-                 "loss": "squared_hinge", "settings": settings.to_json(), "rounds": history}
+                 "loss": "squared_hinge", "settings": settings.to_json(), "rounds": history,
+                 "atom_weights": settings.atom_weights, "atom_scale": settings.atom_scale}
     model.provenance = dict(provenance or {})
     model.provenance.update({"spaces": len(jobs), "instances": int(len(cls)),
                              "buildings": sorted({j.building for j in jobs}),
                              "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)}})
     say(f"trained in {time.perf_counter() - t0:.0f} s")
     return model, samples
+
+
+def _fit_class(s: Samples, mask: np.ndarray, settings: TrainSettings) -> SVMFit:
+    """The SVM of one class on its samples (with each window's own part when ``settings.atom_weights``)."""
+    atoms = (np.concatenate(s.pos_atom), np.concatenate(s.neg_atom)) if settings.atom_weights else None
+    return _fit_svm(np.concatenate(s.pos), np.concatenate(s.neg), mask, settings.c, settings.seed, atoms,
+                    settings.atom_scale)
 
 
 def refit_without(model: Model, samples: dict[int, Samples], disabled: tuple[str, ...],
@@ -485,20 +584,29 @@ def refit_without(model: Model, samples: dict[int, Samples], disabled: tuple[str
         The SVM's ``c`` and ``seed`` (default: the model's training settings).
     """
     kw = model.svm.get("settings", {})
-    c = settings.c if settings is not None else float(kw.get("c", 0.05))
-    seed = settings.seed if settings is not None else int(kw.get("seed", 0))
+    if settings is None:
+        settings = TrainSettings(c=float(kw.get("c", 0.05)), seed=int(kw.get("seed", 0)),
+                                 atom_weights=bool(kw.get("atom_weights", False)),
+                                 atom_scale=float(kw.get("atom_scale", 1.0)))
     layout = FeatureLayout(model.layout.k, tuple(dict.fromkeys(model.layout.disabled + tuple(disabled))),
                            model.layout.min_points, model.layout.colour)
     weights, bias = np.zeros_like(model.weights), np.zeros_like(model.bias)
+    n_atoms = len(model.dictionary.atoms_)
+    atom_w, atom_b = np.zeros((n_atoms, layout.size)), np.zeros(n_atoms)
     trained = model.trained.copy()
     for cl in range(N_CLASSES):
         s = samples.get(cl)
         if not trained[cl] or s is None or not s.pos or not s.neg:
             trained[cl] = False
             continue
-        weights[cl], bias[cl] = _fit_svm(np.concatenate(s.pos), np.concatenate(s.neg), layout.mask, c, seed)
+        fit = _fit_class(s, layout.mask, settings)
+        weights[cl], bias[cl] = fit.weights, fit.bias
+        for a, wa in fit.atom_weights.items():
+            atom_w[a], atom_b[a] = wa, fit.atom_bias[a]
+    own = {"atom_weights": atom_w, "atom_bias": atom_b} if settings.atom_weights else \
+        {"atom_weights": None, "atom_bias": None}
     out = dataclasses.replace(model, layout=layout, weights=weights, bias=bias, trained=trained,
-                              crf=None, crf_arrays={})
+                              crf=None, crf_arrays={}, **own)
     out.svm = dict(model.svm, ablation={"disabled": list(disabled),
                                         "samples": "the full model's (negatives mined with all features)"})
     return out

@@ -193,3 +193,19 @@ def test_detect_command(buildings, trained, client, tmp_path, capsys):
 def test_default_model_loads():
     m = Model.load(default_model_path())
     assert m.trained.sum() >= 10 and len(m.dictionary.atoms_) >= 12
+
+
+def test_a_spaces_one_ceiling_is_taken_in_its_upper_half_and_its_floor_in_its_lower():
+    """``surface-halves``: a table-top plane that outscores the ceiling is not the space's ceiling."""
+    from engine.detection import _in_own_half
+
+    keep = np.array([4, 0, 2])  # best first: a plane at 0.9 m, the ceiling, a window at mid-height
+    lo = np.zeros((5, 3), dtype=np.int64)
+    hi = np.ones((5, 3), dtype=np.int64)
+    lo[4, 2], hi[4, 2] = 9, 10  # middle 0.95 m in a 3 m (30 voxel) space
+    lo[0, 2], hi[0, 2] = 29, 30
+    lo[2, 2], hi[2, 2] = 14, 16  # middle exactly half-way: in both halves
+    assert _in_own_half(keep, lo, hi, 30, upper=True).tolist() == [0, 2]
+    assert _in_own_half(keep, lo, hi, 30, upper=False).tolist() == [4, 2]
+    only_low = np.array([4])
+    assert _in_own_half(only_low, lo, hi, 30, upper=True).tolist() == [4]  # nothing above: keep what there is

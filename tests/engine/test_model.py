@@ -64,3 +64,32 @@ def test_model_validates_shapes():
         Model(m.layout, m.dictionary, m.weights[:, :5], m.bias, m.trained)
     with pytest.raises(ValueError):
         Model(m.layout, m.dictionary, m.weights, m.bias, m.trained, crf_arrays={"edge": np.zeros(3)})
+
+
+def test_window_weights_add_each_windows_own_part_and_round_trip(tmp_path):
+    """A version-2 model: a window scores with its class's weights plus its own; saved and read back."""
+    import dataclasses
+
+    m = _model()
+    n_atoms, d = len(m.dictionary.atoms_), m.layout.size
+    rng = np.random.default_rng(1)
+    aw, ab = rng.normal(size=(n_atoms, d)), rng.normal(size=n_atoms)
+    own = dataclasses.replace(m, atom_weights=aw, atom_bias=ab)
+    atoms = np.arange(n_atoms)
+    codes = [a.class_code for a in m.dictionary.atoms_]
+    w, b = own.window_weights(atoms)
+    np.testing.assert_array_equal(w, m.weights[codes] + aw)
+    np.testing.assert_array_equal(b, m.bias[codes] + ab)
+    w1, b1 = m.window_weights(atoms)  # a model without them: the class's weights alone
+    np.testing.assert_array_equal(w1, m.weights[codes])
+    np.testing.assert_array_equal(b1, m.bias[codes])
+    assert m.params()["version"] == 1 and "atom_weights" not in m.params()["arrays"]
+    own.save(tmp_path / "v2")
+    back = load_model(tmp_path / "v2")
+    assert back.params()["version"] == 2
+    np.testing.assert_array_equal(back.atom_weights, aw)
+    np.testing.assert_array_equal(back.atom_bias, ab)
+    with pytest.raises(ValueError):
+        dataclasses.replace(m, atom_weights=aw[:, :3], atom_bias=ab)
+    with pytest.raises(ValueError):
+        dataclasses.replace(m, atom_weights=aw, atom_bias=None)

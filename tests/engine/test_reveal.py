@@ -1,4 +1,4 @@
-"""Doors and boards get their depth from their points: a door box one voxel off the wall reaches the door."""
+"""Doors get their depth from their points (a door box one voxel off the wall reaches the door); columns their sides."""
 from __future__ import annotations
 
 import numpy as np
@@ -63,3 +63,41 @@ def test_a_door_box_one_voxel_in_front_of_the_wall_reaches_the_door(tmp_path):
     assert len(after) >= 2
     assert max(before) < 0.5
     assert np.mean(np.array(after) >= 0.5) >= 0.75, (before, after)
+
+
+def _faces(rng, x0, x1, y0, y1, faces, n=4000):
+    """Points on the named vertical faces ('x0', 'x1', 'y0', 'y1') of a box from z 0 to 3 m."""
+    out = []
+    for f in faces:
+        z = rng.uniform(0, 3, n)
+        if f[0] == "x":
+            out.append(np.column_stack([np.full(n, x0 if f == "x0" else x1), rng.uniform(y0, y1, n), z]))
+        else:
+            out.append(np.column_stack([rng.uniform(x0, x1, n), np.full(n, y0 if f == "y0" else y1), z]))
+    return np.concatenate(out)
+
+
+def test_solid_sides_move_to_the_faces_where_the_points_stop():
+    """A column's sides come from its faces; beside a pilaster's wall the window's side stays."""
+    rng = np.random.default_rng(3)
+    free = _faces(rng, 1.05, 1.40, 1.05, 1.30, ("x0", "x1", "y0", "y1"))
+    pilaster = _faces(rng, 2.05, 2.40, 2.25, 2.49, ("x0", "x1", "y0"))
+    wall = np.column_stack([rng.uniform(0, 3, 40000), rng.uniform(2.49, 2.5, 40000), rng.uniform(0, 3, 40000)])
+    floor = np.column_stack([rng.uniform(0, 3, 40000), rng.uniform(0, 3, 40000), rng.uniform(0, 0.01, 40000)])
+    pts = np.concatenate([free, pilaster, wall, floor])
+    grid = mom.VoxelGrid.covering(np.array([3.0, 3.0, 3.0]), 0.1, 2_000_000)
+    index = PointIndex(pts, grid)
+    column = ELEMENT_CLASSES.index("column")
+    lo = np.array([[10, 10, 0], [20, 22, 0]])  # a voxel too wide on each side; the pilaster's box
+    hi = np.array([[15, 14, 30], [25, 25, 30]])
+    lo_m, hi_m = lo * 0.1, hi * 0.1
+    settings = RevealSettings(classes=(), solid_classes=("column",))
+    refine_reveals(lo, hi, lo_m, hi_m, np.array([column, column]), grid, index, settings)
+    np.testing.assert_allclose(lo_m[0, :2], [1.05, 1.05], atol=0.01)
+    np.testing.assert_allclose(hi_m[0, :2], [1.40, 1.30], atol=0.01)
+    np.testing.assert_allclose([lo_m[1, 1], hi_m[1, 1]], [2.25, 2.5], atol=0.01)  # front face to the wall
+    np.testing.assert_allclose([lo_m[1, 0], hi_m[1, 0]], [2.0, 2.5])  # the wall runs on along x: kept
+    np.testing.assert_allclose(lo_m[:, 2], 0.0)  # heights unchanged
+    np.testing.assert_allclose(hi_m[:, 2], 3.0)
+    with pytest.raises(ValueError, match="solid-classes"):
+        RevealSettings(solid_classes="pillar")

@@ -43,7 +43,8 @@ def test_ablation_refit_leaves_out_its_columns(trained, variant):
 
 
 def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained):
-    """``make model`` must reproduce the shipped model: its dictionary rule and mining are the settings' defaults."""
+    """``make model`` must reproduce the shipped model: its dictionary rule, mining and window weights are the
+    settings' defaults."""
     import dask
 
     from engine.model import load_model
@@ -51,6 +52,8 @@ def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained
     _, settings, model, _ = trained
     shipped = load_model(None).svm["settings"]
     assert (settings.relative_ratio, settings.mining) == (shipped["relative_ratio"], shipped["mining"]) == (0.5, "hardest")
+    assert (settings.atom_weights, settings.atom_scale) == (shipped["atom_weights"], shipped["atom_scale"]) == (True, 0.5)
+    assert load_model(None).atom_weights is not None
     assert model.dictionary.relative_ratio == 0.5 and model.svm["settings"]["mining"] == "hardest"
     with dask.config.set({"buildingparser.detection.train.relative-ratio": None,
                           "buildingparser.detection.train.mining": "random"}):
@@ -76,8 +79,10 @@ def test_hardest_mining_takes_the_highest_scoring_fresh_violators(trained):
         s = dataclasses.replace(settings, mining=mining, hard_negatives=n)
         out[mining] = _samples_task(job, model, s, 1, det, (0, 1, 2))
     for c in (0, 1, 2):
-        score = {m: np.sort(out[m][c]["neg"].astype(np.float64) @ model.weights[c] + model.bias[c])[::-1]
-                 for m in out}
+        score = {}
+        for m in out:  # each negative scored with its window's weights (the class's plus the window's own)
+            w, b = model.window_weights(out[m][c]["keys"] >> 48)
+            score[m] = np.sort(np.einsum("nd,nd->n", out[m][c]["neg"].astype(np.float64), w) + b)[::-1]
         assert len(score["hardest"]) == len(score["random"]) > 0
         # the top n of the violators beat any n of them, rank by rank (float32 features: a small tolerance)
         assert np.all(score["hardest"] >= score["random"] - 1e-3)
@@ -90,3 +95,78 @@ def test_hardest_mining_takes_the_highest_scoring_fresh_violators(trained):
     assert not np.isin(out["hardest"][c]["keys"][:5], again).any() and len(again) == n
     with pytest.raises(ValueError):
         TrainSettings(mining="best")
+
+
+def test_atom_design_puts_each_row_in_its_windows_block():
+    from engine.training import _atom_design
+
+    x = np.arange(12, dtype=np.float64).reshape(4, 3) + 1
+    atom = np.array([7, -1, 3, 7])
+    ids = np.array([3, 7])
+    dense = _atom_design(x, atom, ids, 2.0).toarray()
+    assert dense.shape == (4, 3 + 2 * 4)
+    np.testing.assert_array_equal(dense[:, :3], x)
+    np.testing.assert_array_equal(dense[0, 3:], [0, 0, 0, 0, *(2 * x[0]), 2])  # atom 7: second block
+    np.testing.assert_array_equal(dense[1, 3:], 0)  # no window: shared part only
+    np.testing.assert_array_equal(dense[2, 3:], [*(2 * x[2]), 2, 0, 0, 0, 0])
+
+
+def test_windows_own_weights_separate_what_shared_weights_cannot():
+    """Two windows of one class whose positives lie on opposite sides of a feature: one shared linear SVM
+    cannot rank both, the class's SVM with each window's own part does."""
+    from engine.training import _fit_svm
+
+    rng = np.random.default_rng(0)
+    n = 200
+    f = rng.uniform(0.2, 1.0, n)
+    x = np.column_stack([np.concatenate([f, -f, -f, f]), rng.normal(size=(4 * n, 2))])
+    # atom 0: positives f > 0, negatives f < 0; atom 5: the other way round
+    pos = np.concatenate([x[:n], x[n:2 * n]])
+    neg = np.concatenate([x[2 * n:3 * n], x[3 * n:]])
+    pos_atom = np.repeat([0, 5], n)
+    neg_atom = np.repeat([0, 5], n)
+    mask = np.ones(3, dtype=bool)
+    shared = _fit_svm(pos, neg, mask, 1.0, 0)
+    s_pos, s_neg = pos @ shared.weights + shared.bias, neg @ shared.weights + shared.bias
+    assert np.mean(s_pos > 0) + np.mean(s_neg < 0) < 1.3  # about chance
+    fit = _fit_svm(pos, neg, mask, 1.0, 0, (pos_atom, neg_atom))
+    assert set(fit.atom_weights) == {0, 5}
+
+    def score(v, a):
+        return v @ (fit.weights + fit.atom_weights[a]) + fit.bias + fit.atom_bias[a]
+
+    assert np.all(score(pos[:n], 0) > 0) and np.all(score(neg[:n], 0) < 0)
+    assert np.all(score(pos[n:], 5) > 0) and np.all(score(neg[n:], 5) < 0)
+
+
+def test_training_with_windows_own_weights_scores_with_them(trained):
+    """``atom-weights``: the model holds each window's part, refits reproduce it, detection uses it."""
+    import dataclasses
+
+    from engine.detection import DetectionSettings, detect_space, prepare_space, space_frame
+    from engine.sliding import score_windows, window_shape
+    from engine.spacedata import index_spaces, load_space
+
+    store, settings, _, _ = trained
+    s = dataclasses.replace(settings, atom_weights=True)
+    model, samples = train_with_samples([store], settings=s)
+    assert model.atom_weights is not None and model.params()["version"] == 2
+    used = [a for a, at in enumerate(model.dictionary.atoms_) if model.trained[at.class_code]]
+    assert np.any(model.atom_weights[used] != 0)
+    same = refit_without(model, samples, ())
+    np.testing.assert_array_equal(same.atom_weights, model.atom_weights)
+    np.testing.assert_array_equal(same.atom_bias, model.atom_bias)
+    # a detection's score is its window's score with the class's and the window's own weights
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    det = DetectionSettings.from_config()
+    det = dataclasses.replace(det, local_search=False, refine=False)
+    props = detect_space(pts, model, det)
+    assert props
+    vol = prepare_space(pts, model, space_frame(pts))
+    p = props[0]
+    a = p.extra["atom"]
+    w, b = model.window_weights([a])
+    shape = window_shape(model.dictionary.atoms_[a].size_in(vol.grid.extent), vol.grid)
+    ws = score_windows(vol, shape, w[0], float(b[0]), model.layout, det.stride, det.min_window_points, det.max_stride)
+    assert np.isclose(ws.scores.max(), max(q.score for q in props if q.extra["atom"] == a), atol=1e-6)
