@@ -27,7 +27,7 @@ from tiles.tasks import run_tasks
 
 
 def check_compatible(models: list[Model]) -> None:
-    """Raise ``ValueError`` unless the models share dictionary, grid, K and colour normalisation."""
+    """Raise ``ValueError`` unless the models share dictionary, grid, K, colour normalisation and global block."""
     if not models:
         raise ValueError("no models")
     m0 = models[0]
@@ -36,9 +36,10 @@ def check_compatible(models: list[Model]) -> None:
         a = m.dictionary.to_arrays()
         same = all(np.array_equal(a[k], a0[k]) for k in a0) and m.voxel == m0.voxel and \
             m.max_cells == m0.max_cells and m.layout.k == m0.layout.k and m.layout.colour == m0.layout.colour and \
-            m.layout.min_points == m0.layout.min_points
+            m.layout.min_points == m0.layout.min_points and m.layout.boundary == m0.layout.boundary
         if not same:
-            raise ValueError("models of one pass need the same dictionary, voxel grid, K and colour normalisation")
+            raise ValueError("models of one pass need the same dictionary, voxel grid, K, colour normalisation and "
+                             "global block")
 
 
 def window_candidates_many(vol: SpaceVolume, models: list[Model],
@@ -47,7 +48,7 @@ def window_candidates_many(vol: SpaceVolume, models: list[Model],
     m0 = models[0]
     grid = vol.grid
     # weights zero on each model's disabled groups: one layout without any disabled group scores them all
-    full = FeatureLayout(m0.layout.k, (), m0.layout.min_points, m0.layout.colour)
+    full = FeatureLayout(m0.layout.k, (), m0.layout.min_points, m0.layout.colour, m0.layout.boundary)
     groups: dict[tuple[int, ...], list[tuple[int, int]]] = {}
     for ai, atom in enumerate(m0.dictionary.atoms_):
         shape = tuple(int(v) for v in window_shape(atom.size_in(grid.extent), grid))

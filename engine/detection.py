@@ -55,6 +55,11 @@ from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
 
 
+CEILING, FLOOR = ELEMENT_CLASSES.index("ceiling"), ELEMENT_CLASSES.index("floor")
+#: How a space's one ceiling and floor are chosen among their windows (:func:`surface_order`).
+SURFACE_CHOICES = ("extreme", "halves", "score")
+
+
 @dataclass
 class DetectionSettings:
     """Run-time settings of the detector (see ``engine/detection.yaml``)."""
@@ -68,7 +73,7 @@ class DetectionSettings:
     nms_min_size: float = 0.3
     max_per_class: int = 30
     one_per_space: tuple[str, ...] = ("ceiling", "floor")
-    surface_halves: bool = True
+    surface_choice: str = "extreme"
     local_search: bool = True
     refine: bool = True
     refine_classes: tuple[str, ...] = ("ceiling", "floor", "wall")
@@ -85,6 +90,8 @@ class DetectionSettings:
             raise ValueError(f"nms-iou must be in [0, 1], got {self.nms_iou}")
         if self.max_per_class < 1 or self.pre_nms < 1:
             raise ValueError("max-per-class and pre-nms must be >= 1")
+        if self.surface_choice not in SURFACE_CHOICES:
+            raise ValueError(f"surface-choice must be one of {', '.join(SURFACE_CHOICES)}, got {self.surface_choice!r}")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
         for name in ("one_per_space", "refine_classes"):
@@ -327,9 +334,10 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
             pad = np.clip(np.ceil(settings.nms_min_size / grid.voxel) - (hi - lo), 0, None) / 2.0
             keep = non_maximum_suppression(lo - pad, hi + pad, sc, settings.nms_iou, settings.max_per_class)
         if ELEMENT_CLASSES[c] in settings.one_per_space:
-            if settings.surface_halves and ELEMENT_CLASSES[c] in ("ceiling", "floor"):
-                keep = _in_own_half(keep, lo, hi, grid.shape[2], upper=ELEMENT_CLASSES[c] == "ceiling")
-            keep = keep[:1]  # a space has one floor and one ceiling: the best window of the class
+            if ELEMENT_CLASSES[c] in ("ceiling", "floor"):
+                keep = surface_order(keep, lo, hi, grid.shape[2], ELEMENT_CLASSES[c] == "ceiling",
+                                     settings.surface_choice)
+            keep = keep[:1]  # a space has one floor and one ceiling: the first window of the class
         lo_all.append(lo[keep]), hi_all.append(hi[keep]), sc_all.append(sc[keep])
         cl_all.append(np.full(len(keep), c)), at_all.append(at[keep])
     if not lo_all:
@@ -342,7 +350,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     lo_m, hi_m = lo * vox, hi * vox
     if settings.refine and index is not None:
         n = np.asarray(grid.shape)
-        surface = np.isin(np.concatenate(cl_all), [ELEMENT_CLASSES.index(c) for c in settings.refine_classes])
+        cls_all = np.concatenate(cl_all)
+        surface = np.isin(cls_all, [ELEMENT_CLASSES.index(c) for c in settings.refine_classes])
         for i in np.nonzero(surface)[0]:
             # surfaces thinner than half a voxel (walls, floors, ceilings as seen from inside)
             atom = atoms[int(at_all_cat[i])]
@@ -353,9 +362,15 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                 # windows NMS merged into this one lie there, and the best-scoring layer may be the
                 # one beside the surface (under a ceiling crossed by beams: the beams' sides)
                 pad = int(max(np.ceil(settings.nms_min_size / vox[a]) - (hi[i, a] - lo[i, a]), 0) // 2)
-                if pad:
+                # a space's one ceiling (floor) is its highest (lowest) dense surface: looked for up to the
+                # top (down to the bottom) of the space, above beams' undersides or a lowered part
+                up = a == 2 and settings.surface_choice == "extreme" and cls_all[i] == CEILING
+                down = a == 2 and settings.surface_choice == "extreme" and cls_all[i] == FLOOR
+                if pad or up or down:
                     blo, bhi = lo[i].copy(), hi[i].copy()
                     blo[a], bhi[a] = max(lo[i, a] - pad, 0), min(hi[i, a] + pad, n[a])
+                    bhi[a] = n[a] if up else bhi[a]
+                    blo[a] = 0 if down else blo[a]
                     shift = surface_shift(index.points_in(blo, bhi)[:, a], int(lo[i, a]), int(hi[i, a]),
                                           int(blo[a]), int(bhi[a]), vox[a], settings.refine_bin)
                     lo[i, a] += shift
@@ -368,12 +383,24 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), np.concatenate(cl_all), at_all_cat)
 
 
-def _in_own_half(keep: np.ndarray, lo: np.ndarray, hi: np.ndarray, nz: int, upper: bool) -> np.ndarray:
-    """The windows of ``keep`` whose middle lies in the upper (ceilings) or lower (floors) half of the space's
-    height; all of them if none does."""
-    mid = (lo[keep, 2] + hi[keep, 2]) / 2.0
-    ok = mid >= nz / 2.0 if upper else mid <= nz / 2.0
-    return keep[ok] if ok.any() else keep
+def surface_order(keep: np.ndarray, lo: np.ndarray, hi: np.ndarray, nz: int, upper: bool,
+                  choice: str = "extreme") -> np.ndarray:
+    """A space's ceiling (``upper``) or floor windows ``keep`` (best score first) in the order its one is taken from.
+
+    ``"extreme"``: highest top first for a ceiling, lowest bottom first for a floor (ties by
+    score): a room's ceiling is its highest horizontal surface, its floor its lowest, while
+    beams' undersides, table tops and shelves can outscore them.  ``"halves"``: the windows
+    whose middle lies in the upper (ceiling) or lower (floor) half of the space's ``nz``
+    voxels, best first (all of them if none does).  ``"score"``: unchanged (best first).
+    """
+    if not len(keep) or choice == "score":
+        return keep
+    if choice == "halves":
+        mid = (lo[keep, 2] + hi[keep, 2]) / 2.0
+        ok = mid >= nz / 2.0 if upper else mid <= nz / 2.0
+        return keep[ok] if ok.any() else keep
+    z = hi[keep, 2] if upper else -lo[keep, 2]
+    return keep[np.argsort(-z, kind="stable")]
 
 
 def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,

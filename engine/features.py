@@ -11,6 +11,8 @@ vector (:class:`FeatureLayout`) is::
              size              S, size in the unit cube                            (3)
              size_code         tent code of S, 5 tents per axis                    (15)
              metric_code       tent code of log2 of the size in metres, 6 per axis (18)
+             boundary_code     tent code of the distance in metres from the window
+                               to the nearer end of the space, 5 per axis          (15)
     local, per sub-box l (x-major order), zero where l holds no points:
              occupancy         B_l, 1 if l holds at least ``min_points`` points    (1)
              ratio             d_l, points of l / points of the window, times K^3  (1)
@@ -36,7 +38,11 @@ or size monotonically (a wall sits at either end of an axis, a chair has a
 typical size), so each is also given as a piecewise-linear "soft one-hot"
 code (:func:`tent_code`).  The metric code carries the window's size in metres,
 which the unit cube discards and which tells a chair from a table whatever the
-room's size.  Normals enter as absolute components: their sign is arbitrary.
+room's size.  The boundary code carries, per axis, how far the window stands
+from the space's nearer end in metres (0 against a wall or the floor): in a
+long room the unit-cube position code cannot tell a board on the end wall from
+a table a metre in front of it.  Models written before it existed have no such
+block (``FeatureLayout.boundary`` False).  Normals enter as absolute components: their sign is arbitrary.
 The ratio is scaled by ``K^3`` so that it is about 1 for an even spread.
 
 All sums come from the integral volume of the space (:mod:`engine.moments`): a
@@ -55,8 +61,11 @@ from engine import moments as mom
 UNIT_TENTS = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: Tent centres of the metric size code, in metres (log2-spaced coding).
 METRIC_TENTS = (0.05, 0.15, 0.4, 1.0, 2.5, 6.0)
+#: Tent centres of the distance to the space's nearer end, in metres.
+BOUNDARY_TENTS = (0.0, 0.1, 0.3, 1.0, 3.0)
 GLOBAL_BLOCKS = (("position", 3), ("position_code", 3 * len(UNIT_TENTS)), ("size", 3),
-                 ("size_code", 3 * len(UNIT_TENTS)), ("metric_code", 3 * len(METRIC_TENTS)))
+                 ("size_code", 3 * len(UNIT_TENTS)), ("metric_code", 3 * len(METRIC_TENTS)),
+                 ("boundary_code", 3 * len(BOUNDARY_TENTS)))
 LOCAL_BLOCKS = (("occupancy", 1), ("ratio", 1), ("color", 3), ("normal", 3), ("curvature", 1))
 LOCAL_SIZE = sum(n for _, n in LOCAL_BLOCKS)
 #: Colour normalisations of a layout: raw colours, or scaled per space to a median luminance.
@@ -68,7 +77,7 @@ COLOUR_TARGET = 0.5
 ABLATIONS: dict[str, tuple[str, ...]] = {
     "full": (),
     "no_local": ("ratio", "normal", "curvature"),
-    "no_global": ("position", "position_code"),
+    "no_global": ("position", "position_code", "boundary_code"),
     "no_color": ("color",),
 }
 
@@ -123,12 +132,15 @@ class FeatureLayout:
         Points a sub-box needs to count as occupied.
     colour
         Colour normalisation of each space before its moments (:data:`COLOUR_MODES`).
+    boundary
+        Whether the global block ends with ``boundary_code`` (models written before it: False).
     """
 
     k: int = 4
     disabled: tuple[str, ...] = ()
     min_points: int = 1
     colour: str = "space-median"
+    boundary: bool = True
     spans: dict[str, list[tuple[int, int]]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -144,7 +156,7 @@ class FeatureLayout:
         self.disabled = tuple(self.disabled)
         spans: dict[str, list[tuple[int, int]]] = {}
         i = 0
-        for name, n in GLOBAL_BLOCKS:
+        for name, n in self.global_blocks:
             spans[name] = [(i, i + n)]
             i += n
         self.n_global = i
@@ -158,26 +170,33 @@ class FeatureLayout:
         self.spans = spans
 
     @property
+    def global_blocks(self) -> tuple[tuple[str, int], ...]:
+        """The global block's groups in order (without ``boundary_code`` in older layouts)."""
+        return GLOBAL_BLOCKS if self.boundary else tuple(b for b in GLOBAL_BLOCKS if b[0] != "boundary_code")
+
+    @property
     def mask(self) -> np.ndarray:
         """Bool ``(size,)``: the columns the model uses."""
         m = np.ones(self.size, dtype=bool)
         for name in self.disabled:
-            for a, b in self.spans[name]:
+            for a, b in self.spans.get(name, []):
                 m[a:b] = False
         return m
 
     def to_json(self) -> dict[str, Any]:
         return {"k": self.k, "disabled": list(self.disabled), "min_points": self.min_points, "colour": self.colour,
-                "size": self.size,
-                "global_blocks": [list(b) for b in GLOBAL_BLOCKS], "local_blocks": [list(b) for b in LOCAL_BLOCKS],
+                "boundary": self.boundary, "size": self.size,
+                "global_blocks": [list(b) for b in self.global_blocks], "local_blocks": [list(b) for b in LOCAL_BLOCKS],
                 "unit_tents": list(UNIT_TENTS), "metric_tents": list(METRIC_TENTS),
+                "boundary_tents": list(BOUNDARY_TENTS),
                 "order": "global blocks, then for each sub-box (x-major: index = (i*K + j)*K + k) its local blocks"}
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> "FeatureLayout":
         # models written before colour normalisation existed used raw colours
+        # and before the boundary code existed had no such block
         lay = cls(int(d["k"]), tuple(d.get("disabled", ())), int(d.get("min_points", 1)),
-                  str(d.get("colour", "none")))
+                  str(d.get("colour", "none")), bool(d.get("boundary", False)))
         if "size" in d and int(d["size"]) != lay.size:
             raise ValueError(f"feature layout of size {d['size']}, this version builds {lay.size}")
         return lay
@@ -189,8 +208,13 @@ def sub_bounds(width: np.ndarray, k: int) -> np.ndarray:
     return (np.arange(k + 1) * w[..., None]) // k
 
 
-def global_features(position: np.ndarray, size: np.ndarray, metric_size: np.ndarray) -> np.ndarray:
-    """The global block ``(..., n_global)`` from unit-cube P, S and the size in metres (all ``(..., 3)``)."""
+def global_features(position: np.ndarray, size: np.ndarray, metric_size: np.ndarray,
+                    extent: np.ndarray | None = None) -> np.ndarray:
+    """The global block ``(..., n_global)`` from unit-cube P, S and the size in metres (all ``(..., 3)``).
+
+    With the space's ``extent`` (metres, ``(3,)``) the block ends with the boundary code
+    (layouts with ``boundary``); without it, it stops after the metric size code.
+    """
     position = np.asarray(position, dtype=np.float64)
     size = np.asarray(size, dtype=np.float64)
     centre = position + size / 2.0
@@ -198,11 +222,20 @@ def global_features(position: np.ndarray, size: np.ndarray, metric_size: np.ndar
     parts = [position, tent_code(centre, UNIT_TENTS).reshape(*lead, -1), size,
              tent_code(size, UNIT_TENTS).reshape(*lead, -1),
              tent_code(np.log2(np.maximum(metric_size, 1e-6)), np.log2(METRIC_TENTS)).reshape(*lead, -1)]
+    if extent is not None:
+        parts.append(tent_code(boundary_distance(position, size, extent), BOUNDARY_TENTS).reshape(*lead, -1))
     return np.concatenate(parts, axis=-1)
 
 
+def boundary_distance(position: np.ndarray, size: np.ndarray, extent: np.ndarray) -> np.ndarray:
+    """Metres from a window (unit-cube ``position`` and ``size``) to the space's nearer end, per axis."""
+    ext = np.asarray(extent, dtype=np.float64)
+    return np.maximum(np.minimum(position, 1.0 - position - size) * ext, 0.0)
+
+
 def global_scores(positions: tuple[np.ndarray, np.ndarray, np.ndarray], shape: np.ndarray, grid_shape,
-                  voxel: np.ndarray, weights: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+                  voxel: np.ndarray, weights: np.ndarray,
+                  boundary: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
     """The global block's share of linear scores of one window shape at a grid of positions, separably.
 
     Parameters
@@ -215,6 +248,8 @@ def global_scores(positions: tuple[np.ndarray, np.ndarray, np.ndarray], shape: n
         The space's grid: voxels per axis and voxel size (metres) per axis.
     weights
         ``(m, n_global)`` weights of the global block.
+    boundary
+        Whether the block ends with the boundary code (the layout's ``boundary``).
 
     Returns
     -------
@@ -229,14 +264,20 @@ def global_scores(positions: tuple[np.ndarray, np.ndarray, np.ndarray], shape: n
     shape = np.asarray(shape)
     size = shape / n
     weights = np.asarray(weights, dtype=np.float64)
-    nt = len(UNIT_TENTS)
+    nt, nb = len(UNIT_TENTS), len(BOUNDARY_TENTS)
+    cut = 3 + 3 * nt  # then S, its code and the metric code: the same for every position
+    end = cut + 3 + 3 * nt + 3 * len(METRIC_TENTS)  # then the boundary code, per axis again
+    extent = n * np.asarray(voxel, dtype=np.float64)
     terms = []
     for a in range(3):
         p = np.asarray(positions[a]) / n[a]
         code = tent_code(p + size[a] / 2.0, UNIT_TENTS)  # (n_a, 5): the position code's columns of axis a
-        terms.append(weights[:, a, None] * p[None] + weights[:, 3 + a * nt:3 + (a + 1) * nt] @ code.T)
-    cut = 3 + 3 * nt  # then S, its code and the metric code: the same for every position
-    const = weights[:, cut:] @ global_features(np.zeros(3), size, shape * np.asarray(voxel))[cut:]
+        t = weights[:, a, None] * p[None] + weights[:, 3 + a * nt:3 + (a + 1) * nt] @ code.T
+        if boundary:
+            d = boundary_distance(p, size[a], extent[a])
+            t = t + weights[:, end + a * nb:end + (a + 1) * nb] @ tent_code(d, BOUNDARY_TENTS).T
+        terms.append(t)
+    const = weights[:, cut:end] @ global_features(np.zeros(3), size, shape * np.asarray(voxel))[cut:end]
     return terms, const
 
 
@@ -284,7 +325,8 @@ def window_features(iv: np.ndarray, grid: mom.VoxelGrid, lo: np.ndarray, hi: np.
     for s in range(0, len(lo), chunk):
         l, h = lo[s:s + chunk], hi[s:s + chunk]
         w = h - l
-        out[s:s + chunk, :layout.n_global] = global_features(l / shape, w / shape, w * vox)
+        out[s:s + chunk, :layout.n_global] = global_features(l / shape, w / shape, w * vox,
+                                                              shape * vox if layout.boundary else None)
         b = sub_bounds(w, k)  # (m, 3, k+1)
         starts = l[:, :, None] + b[:, :, :-1]
         stops = l[:, :, None] + b[:, :, 1:]

@@ -220,7 +220,7 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
     valid = counts >= min_points
     acc = np.zeros((2 * m,) + counts.shape)  # per model: the linear part, then the ratio's weighted raw counts
     # the global part, separable: a term per position along each axis and a constant per shape
-    terms, const = global_scores((px, py, pz), shape, n, grid.voxel, wg)
+    terms, const = global_scores((px, py, pz), shape, n, grid.voxel, wg, layout.boundary)
     for j in range(m):
         acc[j] = terms[0][j][:, None, None] + terms[1][j][None, :, None] + terms[2][j][None, None, :]
         acc[j] += const[j] + bias[j]

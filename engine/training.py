@@ -589,7 +589,7 @@ def refit_without(model: Model, samples: dict[int, Samples], disabled: tuple[str
                                  atom_weights=bool(kw.get("atom_weights", False)),
                                  atom_scale=float(kw.get("atom_scale", 1.0)))
     layout = FeatureLayout(model.layout.k, tuple(dict.fromkeys(model.layout.disabled + tuple(disabled))),
-                           model.layout.min_points, model.layout.colour)
+                           model.layout.min_points, model.layout.colour, model.layout.boundary)
     weights, bias = np.zeros_like(model.weights), np.zeros_like(model.bias)
     n_atoms = len(model.dictionary.atoms_)
     atom_w, atom_b = np.zeros((n_atoms, layout.size)), np.zeros(n_atoms)

@@ -195,17 +195,56 @@ def test_default_model_loads():
     assert m.trained.sum() >= 10 and len(m.dictionary.atoms_) >= 12
 
 
-def test_a_spaces_one_ceiling_is_taken_in_its_upper_half_and_its_floor_in_its_lower():
-    """``surface-halves``: a table-top plane that outscores the ceiling is not the space's ceiling."""
-    from engine.detection import _in_own_half
+def test_a_spaces_one_ceiling_is_its_highest_window_and_its_floor_its_lowest():
+    """``surface-choice``: a table-top plane or a beam's underside that outscores the ceiling is not the ceiling."""
+    from engine.detection import surface_order
 
-    keep = np.array([4, 0, 2])  # best first: a plane at 0.9 m, the ceiling, a window at mid-height
+    keep = np.array([4, 0, 2, 3])  # best first: a plane at 0.9 m, the ceiling, a window at mid-height, the floor
     lo = np.zeros((5, 3), dtype=np.int64)
     hi = np.ones((5, 3), dtype=np.int64)
     lo[4, 2], hi[4, 2] = 9, 10  # middle 0.95 m in a 3 m (30 voxel) space
     lo[0, 2], hi[0, 2] = 29, 30
     lo[2, 2], hi[2, 2] = 14, 16  # middle exactly half-way: in both halves
-    assert _in_own_half(keep, lo, hi, 30, upper=True).tolist() == [0, 2]
-    assert _in_own_half(keep, lo, hi, 30, upper=False).tolist() == [4, 2]
-    only_low = np.array([4])
-    assert _in_own_half(only_low, lo, hi, 30, upper=True).tolist() == [4]  # nothing above: keep what there is
+    lo[3, 2], hi[3, 2] = 0, 1
+    assert surface_order(keep, lo, hi, 30, upper=True)[0] == 0
+    assert surface_order(keep, lo, hi, 30, upper=False)[0] == 3
+    assert surface_order(keep, lo, hi, 30, True, "halves").tolist() == [0, 2]
+    assert surface_order(keep, lo, hi, 30, False, "halves").tolist() == [4, 2, 3]
+    assert surface_order(np.array([4]), lo, hi, 30, True, "halves").tolist() == [4]  # nothing above: what there is
+    assert surface_order(keep, lo, hi, 30, True, "score").tolist() == keep.tolist()
+    ties = np.array([2, 1])  # same height: the better score first
+    lo[1], hi[1] = lo[2], hi[2]
+    assert surface_order(ties, lo, hi, 30, upper=True).tolist() == [2, 1]
+    with pytest.raises(ValueError, match="surface-choice"):
+        DetectionSettings(surface_choice="highest")
+
+
+@pytest.mark.parametrize("choice", ["extreme", "score"])
+def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path, choice):
+    """``surface-choice: extreme``: each space's ceiling is at its ground-truth height (within 5 cm), not at the
+    beams' undersides; with ``score`` (the best window, searched beside it only) at least one is not."""
+    import dataclasses
+
+    from engine.detection import detect_space
+    from engine.model import load_model
+    from engine.spacedata import index_spaces, load_space
+    from tiles.store import open_store
+
+    generate(str(tmp_path / "b.zarr"), seed=43, rooms=3, density=800, yaw=20.0)
+    store = open_store(str(tmp_path / "b.zarr"))
+    gt = store.doc("ground_truth")["elements"]
+    assert sum(e["class"] == "beam" for e in gt) >= 3  # the building this test needs
+    origin = np.asarray(store.meta.origin)
+    settings = dataclasses.replace(DetectionSettings.from_config(), surface_choice=choice)
+    model = load_model(None)
+    errors = []
+    for ref in index_spaces(store, "gt_space"):
+        want = [e for e in gt if int(e["space"]) == ref.space_id and e["class"] == "ceiling"]
+        props = detect_space(load_space(store, ref, "gt_space"), model, settings, origin)
+        got = [p for p in props if p.class_code == 0]  # ceiling
+        assert len(got) == 1 and len(want) == 1
+        errors.append(abs(got[0].center[2] - want[0]["center"][2]))
+    if choice == "extreme":
+        assert max(errors) < 0.05, errors
+    else:
+        assert max(errors) >= 0.05, errors

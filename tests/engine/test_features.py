@@ -78,7 +78,8 @@ def test_hand_made_voxel_pattern():
     # global features: P = 0, S = 1, sizes 0.4 m
     g = f[:lay.n_global]
     assert np.allclose(g[:3], 0) and np.allclose(g[18:21], 1)
-    assert np.allclose(g, global_features(np.zeros(3), np.ones(3), np.full(3, 0.4)))
+    assert np.allclose(g, global_features(np.zeros(3), np.ones(3), np.full(3, 0.4), np.full(3, 0.4)))
+    assert np.allclose(g[-15:].reshape(3, 5), [1, 0, 0, 0, 0])  # against both ends: distance 0
 
 
 def test_min_points_and_disabled_groups():
@@ -191,13 +192,30 @@ def test_global_scores_are_the_global_block_times_the_weights(shape):
     n = np.asarray(grid.shape)
     shape = np.minimum(shape, n)
     pos = [np.unique(np.append(np.arange(0, n[a] - shape[a] + 1, 2), n[a] - shape[a])) for a in range(3)]
-    lay = FeatureLayout(k=2)
-    w = rng.normal(size=(3, lay.n_global))
-    terms, const = global_scores(pos, shape, grid.shape, grid.voxel, w)
     lo = np.stack(np.meshgrid(*pos, indexing="ij"), axis=-1).reshape(-1, 3)
     size = np.broadcast_to(shape, lo.shape)
-    want = global_features(lo / n, size / n, size * grid.voxel) @ w.T
     i, j, k = np.unravel_index(np.arange(len(lo)), [len(p) for p in pos])
-    got = terms[0][:, i] + terms[1][:, j] + terms[2][:, k] + const[:, None]
-    assert np.allclose(got.T, want, rtol=0, atol=1e-12)
-    assert np.ptp(want[:, 0]) > 0.1  # the positions matter
+    for boundary in (True, False):  # the current layout, and one written before the boundary code
+        lay = FeatureLayout(k=2, boundary=boundary)
+        w = rng.normal(size=(3, lay.n_global))
+        terms, const = global_scores(pos, shape, grid.shape, grid.voxel, w, boundary)
+        want = global_features(lo / n, size / n, size * grid.voxel, n * grid.voxel if boundary else None) @ w.T
+        got = terms[0][:, i] + terms[1][:, j] + terms[2][:, k] + const[:, None]
+        assert np.allclose(got.T, want, rtol=0, atol=1e-12)
+        assert np.ptp(want[:, 0]) > 0.1  # the positions matter
+
+
+def test_boundary_code_is_the_metric_distance_to_the_nearer_end():
+    """A window against an end of a long space is at distance 0 along that axis whatever the room's size."""
+    from engine.features import BOUNDARY_TENTS, boundary_distance
+
+    ext = np.array([20.0, 4.0, 3.0])
+    pos = np.array([0.0, 0.25, 0.5])
+    size = np.array([0.1, 0.5, 0.5])
+    np.testing.assert_allclose(boundary_distance(pos, size, ext), [0.0, 1.0, 0.0])
+    g = global_features(pos, size, size * ext, ext)
+    code = g[-3 * len(BOUNDARY_TENTS):].reshape(3, -1)
+    np.testing.assert_allclose(code, [[1, 0, 0, 0, 0], [0, 0, 0, 1, 0], [1, 0, 0, 0, 0]])
+    old = FeatureLayout.from_json({k: v for k, v in FeatureLayout().to_json().items() if k not in ("boundary", "size")})
+    assert not old.boundary and old.size == FeatureLayout().size - 15 and "boundary_code" not in old.spans
+    assert FeatureLayout.from_json(FeatureLayout().to_json()).boundary
