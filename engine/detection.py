@@ -51,7 +51,7 @@ from engine.proposals import Proposal
 from engine.reveal import refine_reveals
 from engine.sliding import WindowScores, non_maximum_suppression, score_windows_many, window_shape
 from engine.spacedata import SpacePoints, SpaceRef, index_spaces, load_space
-from tiles.classes import ELEMENT_CLASSES
+from tiles.classes import ELEMENT_CLASSES, element_class_list
 from tiles.tasks import run_tasks
 
 
@@ -95,12 +95,7 @@ class DetectionSettings:
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
         for name in ("one_per_space", "refine_classes"):
-            v = getattr(self, name)
-            v = tuple(c.strip() for c in v.split(",") if c.strip()) if isinstance(v, str) else tuple(v)
-            bad = [c for c in v if c not in ELEMENT_CLASSES]
-            if bad:
-                raise ValueError(f"{name.replace('_', '-')}: unknown element class(es) {', '.join(bad)}")
-            setattr(self, name, v)
+            setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "DetectionSettings":
@@ -348,9 +343,9 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     at_all_cat = np.concatenate(at_all)
     vox = grid.voxel
     lo_m, hi_m = lo * vox, hi * vox
+    cls_all = np.concatenate(cl_all)
     if settings.refine and index is not None:
         n = np.asarray(grid.shape)
-        cls_all = np.concatenate(cl_all)
         surface = np.isin(cls_all, [ELEMENT_CLASSES.index(c) for c in settings.refine_classes])
         for i in np.nonzero(surface)[0]:
             # surfaces thinner than half a voxel (walls, floors, ceilings as seen from inside)
@@ -379,8 +374,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                 pts = index.points_in(lo[i], hi[i])
                 lo_m[i, a], hi_m[i, a] = refine_extent(pts[:, a], lo_m[i, a], hi_m[i, a], settings.refine_bin)
     if settings.refine and index is not None:
-        refine_reveals(lo, hi, lo_m, hi_m, np.concatenate(cl_all), grid, index)  # doors' depth, columns' sides
-    return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), np.concatenate(cl_all), at_all_cat)
+        refine_reveals(lo, hi, lo_m, hi_m, cls_all, grid, index)  # doors' depth, columns' sides
+    return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), cls_all, at_all_cat)
 
 
 def surface_order(keep: np.ndarray, lo: np.ndarray, hi: np.ndarray, nz: int, upper: bool,

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from engine import config
-from tiles.classes import ELEMENT_CLASSES
+from tiles.classes import ELEMENT_CLASSES, element_class_list
 
 
 @dataclass
@@ -51,8 +51,8 @@ class RevealSettings:
     solid_edge: float = 0.02
 
     def __post_init__(self) -> None:
-        self.classes = _class_list(self.classes, "reveal-classes")
-        self.solid_classes = _class_list(self.solid_classes, "solid-classes")
+        self.classes = element_class_list(self.classes, "reveal-classes")
+        self.solid_classes = element_class_list(self.solid_classes, "solid-classes")
         if self.grow < 0 or not 0 <= self.quantile < 0.5 or self.thin_voxels < 0 or self.solid_edge < 0:
             raise ValueError("need reveal-grow >= 0, 0 <= reveal-quantile < 0.5, thin-voxels >= 0, solid-edge >= 0")
 
@@ -75,15 +75,6 @@ class RevealSettings:
     @property
     def solid_codes(self) -> list[int]:
         return [ELEMENT_CLASSES.index(c) for c in self.solid_classes]
-
-
-def _class_list(v: Any, key: str) -> tuple[str, ...]:
-    """Element class names from a comma-separated string or a sequence; unknown names are a ValueError."""
-    v = tuple(c.strip() for c in v.split(",") if c.strip()) if isinstance(v, str) else tuple(v or ())
-    bad = [c for c in v if c not in ELEMENT_CLASSES]
-    if bad:
-        raise ValueError(f"{key}: unknown element class(es) {', '.join(bad)}")
-    return v
 
 
 def point_span(values: np.ndarray, lo: float, hi: float, quantile: float, min_size: float) -> tuple[float, float]:

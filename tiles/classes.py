@@ -14,6 +14,18 @@ STRUCTURAL_CLASSES: tuple[str, ...] = ("ceiling", "floor", "wall", "beam", "colu
 FURNITURE_CLASSES: tuple[str, ...] = ("table", "chair", "sofa", "bookcase", "board")
 
 
+def element_class_list(value, key: str) -> tuple[str, ...]:
+    """Element class names from a comma-separated string or a sequence (a setting's value).
+
+    Unknown names are a ``ValueError`` naming the setting ``key``.
+    """
+    v = tuple(c.strip() for c in value.split(",") if c.strip()) if isinstance(value, str) else tuple(value or ())
+    bad = [c for c in v if c not in ELEMENT_CLASSES]
+    if bad:
+        raise ValueError(f"{key}: unknown element class(es) {', '.join(bad)}")
+    return v
+
+
 def class_code(name: str) -> int:
     """Code of a class name; names outside the 13 classes (e.g. ``stairs``) are clutter."""
     return CLASS_CODES.get(name.strip().lower(), CLUTTER)
