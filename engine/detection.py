@@ -30,7 +30,9 @@ For every space (one task each, its points gathered from the tiles it touches):
    the surface: under a ceiling crossed by beams, the layer of the beams' sides,
    the ceiling one voxel above.  The points are found through a voxel-sorted
    index, not a search;
-6. the proposals, mapped back to world coordinates through the frame
+6. the model's learned box regression, if it has one (:mod:`engine.boxfit`, ``box-fit``):
+   the classes it was validated for have their faces moved by it;
+7. the proposals, mapped back to world coordinates through the frame
    (:class:`engine.proposals.Proposal`: unit-cube P, S, B plus the world box).
 
 Settings: ``buildingparser.detection.*`` (``engine/detection.yaml``).
@@ -80,6 +82,7 @@ class DetectionSettings:
     thin_voxels: int = 2
     refine_bin: float = 0.005
     label_margin: float = 0.02
+    box_fit: bool = True
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -126,6 +129,14 @@ class PointIndex:
         n_cells = int(np.prod(grid.shape))
         self.points = metric[mom.voxel_order(flat, n_cells)]
         self.offsets = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=n_cells))])
+
+    def points_in_metric(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Canonical points of the voxels that the metric box ``[lo, hi]`` touches (a superset of its points)."""
+        vox = np.asarray(self.grid.voxel, dtype=np.float64)
+        n = np.asarray(self.grid.shape)
+        vlo = np.clip(np.floor(np.asarray(lo) / vox).astype(np.int64), 0, n - 1)
+        vhi = np.clip(np.ceil(np.asarray(hi) / vox).astype(np.int64), vlo + 1, n)
+        return self.points_in(vlo, vhi)
 
     def points_in(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Canonical points ``(m, 3)`` of the voxel box ``[lo, hi)``."""
@@ -375,6 +386,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                 lo_m[i, a], hi_m[i, a] = refine_extent(pts[:, a], lo_m[i, a], hi_m[i, a], settings.refine_bin)
     if settings.refine and index is not None:
         refine_reveals(lo, hi, lo_m, hi_m, cls_all, grid, index)  # doors' depth, columns' sides
+        if model.boxfit is not None and settings.box_fit:
+            model.boxfit.apply(lo_m, hi_m, cls_all, index.points_in_metric, np.asarray(vol.frame.extent, float))
     return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), cls_all, at_all_cat)
 
 

@@ -15,15 +15,20 @@
     atom_weights      float64 (A, D)      optional (version 2): each window's own part of its class's SVM; a
                                           window of atom a scores with weights[class] + atom_weights[a]
     atom_bias         float64 (A,)        optional (version 2): each window's own part of the intercept
+    boxfit_coef       float64 (12, 3, 2, F+1) optional (version 3): per class, axis role and face, the learned box
+                                          regression's weights on the F point features then its intercept
+                                          (engine.boxfit)
+    boxfit_enabled    bool    (12,)       optional (version 3): the class's detections are moved by it
     crf_*             any                 the CRF's arrays (engine.crf.CRFWeights.to_arrays), stored as given
 
 ``<stem>.json``::
 
-    {"format": "buildingparser-detector", "version": 1 (2 with atom_weights), "classes": [...12 names...],
+    {"format": "buildingparser-detector", "version": 1 (2 with atom_weights, 3 with boxfit_*), "classes": [...12 names...],
      "layout": FeatureLayout.to_json(), "voxel": metres, "max_cells": int, "stride": fraction,
      "detection": {...the detection settings the model was trained with...},
      "dictionary": WindowDictionary.params(), "svm": {...}, "provenance": {...}, "cv": {...} | null,
-     "crf": {...the CRF's JSON parameters...} | null, "arrays": {name: description}}
+     "crf": {...the CRF's JSON parameters...} | null, "boxfit": {...its validation report...} | null,
+     "arrays": {name: description}}
 
 The CRF engineer's slot: :attr:`Model.crf` (JSON) and :attr:`Model.crf_arrays`
 (arrays whose names start with ``crf_``) are written and read back unchanged.
@@ -37,14 +42,16 @@ from typing import Any
 
 import numpy as np
 
+from engine.boxfit import BoxFit
 from engine.dictionary import WindowDictionary
 from engine.features import FeatureLayout
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
 
 FORMAT = "buildingparser-detector"
-#: The newest version this code reads; a model is written as version 1 unless it has per-window weights.
-VERSION = 2
+#: The newest version this code reads; a model is written as version 1, 2 with per-window weights, 3 with a
+#: learned box regression.
+VERSION = 3
 ARRAY_DOCS = {
     "weights": "float64 (12, D): linear SVM weights per element class, zero on disabled feature groups",
     "bias": "float64 (12,): SVM intercept per class",
@@ -57,6 +64,9 @@ ARRAY_DOCS = {
     "atom_members": "int64 (A,): training instances in the window's cluster",
     "atom_weights": "float64 (A, D): each window's own part of its class's SVM weights (added to weights[class])",
     "atom_bias": "float64 (A,): each window's own part of its class's SVM intercept (added to bias[class])",
+    "boxfit_coef": "float64 (12, 3, 2, F + 1): box regression weights per class, axis role (thinner horizontal, "
+                   "wider horizontal, vertical) and face (towards the space's nearer end first), intercept last",
+    "boxfit_enabled": "bool (12,): the class's detections are moved by the box regression",
 }
 
 
@@ -94,6 +104,7 @@ class Model:
     crf_arrays: dict[str, np.ndarray] = field(default_factory=dict)
     atom_weights: np.ndarray | None = None  # (A, D)
     atom_bias: np.ndarray | None = None  # (A,)
+    boxfit: BoxFit | None = None  # learned box regression (engine.boxfit)
 
     def __post_init__(self) -> None:
         self.weights = np.asarray(self.weights, dtype=np.float64)
@@ -132,6 +143,8 @@ class Model:
         out = {"weights": self.weights, "bias": self.bias, "trained": self.trained}
         if self.atom_weights is not None:
             out.update(atom_weights=self.atom_weights, atom_bias=self.atom_bias)
+        if self.boxfit is not None:
+            out.update(self.boxfit.to_arrays())
         out.update(self.dictionary.to_arrays())
         out.update(self.crf_arrays)
         return out
@@ -141,10 +154,14 @@ class Model:
         docs.update({k: "CRF array (engine.crf)" for k in self.crf_arrays})
         if self.atom_weights is None:
             docs = {k: v for k, v in docs.items() if not k.startswith("atom_weights") and k != "atom_bias"}
-        return {"format": FORMAT, "version": 1 if self.atom_weights is None else 2, "classes": list(ELEMENT_CLASSES),
+        if self.boxfit is None:
+            docs = {k: v for k, v in docs.items() if not k.startswith("boxfit_")}
+        version = 3 if self.boxfit is not None else 1 if self.atom_weights is None else 2
+        return {"format": FORMAT, "version": version, "classes": list(ELEMENT_CLASSES),
                 "layout": self.layout.to_json(), "voxel": self.voxel, "max_cells": self.max_cells,
                 "stride": self.stride, "detection": self.detection, "dictionary": self.dictionary.params(),
-                "svm": self.svm, "provenance": self.provenance, "cv": self.cv, "crf": self.crf, "arrays": docs}
+                "svm": self.svm, "provenance": self.provenance, "cv": self.cv, "crf": self.crf,
+                "boxfit": None if self.boxfit is None else self.boxfit.report, "arrays": docs}
 
     def save(self, path: str | os.PathLike) -> tuple[str, str]:
         """Write ``<stem>.npz`` and ``<stem>.json``; returns their paths."""
@@ -191,7 +208,8 @@ class Model:
                        svm=params.get("svm", {}), provenance=params.get("provenance", {}), cv=params.get("cv"),
                        crf=params.get("crf"),
                        crf_arrays={k: v for k, v in arrays.items() if k.startswith("crf_")},
-                       atom_weights=arrays.get("atom_weights"), atom_bias=arrays.get("atom_bias"))
+                       atom_weights=arrays.get("atom_weights"), atom_bias=arrays.get("atom_bias"),
+                       boxfit=BoxFit.from_arrays(arrays, params.get("boxfit")))
         except (KeyError, ValueError) as exc:
             raise UserError(stem + ".npz", f"incomplete or inconsistent model ({exc})") from None
 

@@ -23,6 +23,11 @@ it touches), and only small arrays come back to the driver:
    training, see ``engine/detection.yaml``) or a seeded random subset
    (``mining: random``, the older models), and the classes that got new ones
    are retrained, until no class gets any or ``rounds`` is reached.
+6. **Box regression** (``box-fit`` classes, one pass): the trained detectors run over
+   the training spaces; their detections near an element of their class teach the
+   per-class regression of the element's faces on the points around the box
+   (:mod:`engine.boxfit`), kept per axis role only where leave-one-building-out
+   validation says it helps.
 
 Folds are buildings: :func:`cross_validate` trains on all buildings but one and
 evaluates on that one, for each, so no building is both trained and tested on.
@@ -42,19 +47,24 @@ from sklearn.svm import LinearSVC
 
 from engine import config
 from engine import moments as mom
+from engine.boxfit import box_features, face_targets, fit_boxfit
 from engine.canonical import CanonicalFrame
-from engine.detection import DetectionSettings, prepare_space, space_frame
+from engine.detection import DetectionSettings, PointIndex, detect_in_volume, prepare_space, space_frame
 from engine.dictionary import WindowDictionary
 from engine.features import FeatureLayout, SpaceVolume, window_features
 from engine.model import Model
-from engine.sliding import grid_iou, score_windows, window_positions, window_shape
+from engine.sliding import box_iou, grid_iou, score_windows, window_positions, window_shape
 from engine.spacedata import SpaceRef, index_spaces, load_space
-from tiles.classes import ELEMENT_CLASSES
+from tiles.classes import ELEMENT_CLASSES, element_class_list
 from tiles.errors import UserError
 from tiles.groundtruth import DOC as GT_DOC
 from tiles.tasks import run_tasks
 
 N_CLASSES = len(ELEMENT_CLASSES)
+#: A training detection teaches the box regression when it overlaps an element of its class this much.
+BOXFIT_MIN_IOU = 0.2
+#: ... among the detections of a non-maximum suppression at this IoU (looser than the run's).
+BOXFIT_NMS_IOU = 0.6
 #: Elements with fewer points than this in their space are not used for training.
 MIN_INSTANCE_POINTS = 10
 
@@ -86,6 +96,7 @@ class TrainSettings:
     disabled: tuple[str, ...] = ()
     classes: tuple[int, ...] = tuple(range(N_CLASSES))
     max_stride: float = 0.5
+    box_fit: str = ""
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
@@ -104,6 +115,12 @@ class TrainSettings:
             raise ValueError("mining must be 'random' or 'hardest'")
         if self.atom_scale <= 0:
             raise ValueError("atom-scale must be positive")
+        self.box_fit = ",".join(element_class_list(self.box_fit, "box-fit"))
+
+    @property
+    def box_fit_codes(self) -> list[int]:
+        """Class codes that get a learned box regression (``box-fit``)."""
+        return [ELEMENT_CLASSES.index(c) for c in self.box_fit.split(",") if c]
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "TrainSettings":
@@ -546,6 +563,8 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
         active = tuple(c for c in active if trained[c] and (round_ == 0 or new[c] > 0))
         if round_ > 0 and not active:
             break
+    if any(model.trained[c] for c in settings.box_fit_codes):
+        model.boxfit = _train_boxfit(jobs, model, det_run, settings, client, say)
     model.detection = det_run.to_json()
     model.svm = {"estimator": "sklearn.svm.LinearSVC (liblinear)", "C": settings.c, "class_weight": "balanced",
                  "loss": "squared_hinge", "settings": settings.to_json(), "rounds": history,
@@ -556,6 +575,55 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
                              "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)}})
     say(f"trained in {time.perf_counter() - t0:.0f} s")
     return model, samples
+
+
+def _boxfit_task(job: TrainJob, model: Model, det: DetectionSettings, codes: tuple[int, ...],
+                 min_iou: float) -> dict[str, np.ndarray]:
+    """The space's detections of classes ``codes`` that overlap an element of their class by ``min_iou``,
+    with their box-regression features and the faces of that element (:mod:`engine.boxfit`)."""
+    pts = load_space(job.store, job.ref, "gt_space", truth=True)
+    frame = CanonicalFrame.from_json(job.frame) if job.frame else space_frame(pts)
+    metric = frame.to_metric(pts.xyz)
+    grid = mom.VoxelGrid.covering(frame.extent, model.voxel, model.max_cells)
+    flat = grid.flat_index(metric)
+    vol = SpaceVolume.from_metric(metric, pts.rgb, frame, grid, model.layout.colour, flat)
+    index = PointIndex(metric, grid, flat)
+    d = detect_in_volume(vol, model, det, index, classes=list(codes))
+    gt = _canonical_gt(job, vol, pts.gt_instance)
+    rows, match = [], []
+    for i in range(len(d.score)):
+        same = np.nonzero(gt["cls"] == d.class_code[i])[0]
+        if len(same):
+            iou = box_iou(d.lo_m[i], d.hi_m[i], gt["lo"][same], gt["hi"][same])[0]
+            if iou.max() >= min_iou:
+                rows.append(i), match.append(same[int(np.argmax(iou))])
+    lo, hi = d.lo_m[rows].reshape(-1, 3), d.hi_m[rows].reshape(-1, 3)
+    gt_lo, gt_hi = gt["lo"][match].reshape(-1, 3), gt["hi"][match].reshape(-1, 3)
+    feats, _ = box_features(index.points_in_metric, lo, hi, frame.extent)
+    return {"cls": d.class_code[rows].astype(np.int64), "feats": feats,
+            "targets": face_targets(lo, hi, gt_lo, gt_hi, frame.extent), "lo": lo, "hi": hi, "gt_lo": gt_lo,
+            "gt_hi": gt_hi, "extent": np.tile(np.asarray(frame.extent, dtype=np.float64), (len(rows), 1))}
+
+
+def _train_boxfit(jobs: list[TrainJob], model: Model, det: DetectionSettings, settings: TrainSettings, client,
+                  say) -> Any:
+    """The box regressions (:func:`engine.boxfit.fit_boxfit`) from the trained detectors' own detections
+    in the training spaces (without the one-per-space and refined surface classes, which have rules)."""
+    codes = tuple(c for c in settings.box_fit_codes if model.trained[c])
+    # a looser NMS than at run time: the near misses beside each element, which the regression is to
+    # fix on new buildings, are in the samples too (the kept detections alone fit the training
+    # elements too well to teach it: 1,089 samples against 365 on the shipped model's data)
+    det = dataclasses.replace(det, nms_iou=BOXFIT_NMS_IOU, max_per_class=max(det.max_per_class, 100))
+    res = run_tasks(_boxfit_task, jobs, client=client, label="box regression samples",
+                    keys=[f"space {j.key}" for j in jobs], extra_args=(model, det, codes, BOXFIT_MIN_IOU))
+    names = sorted({j.building for j in jobs})
+    samples = {k: np.concatenate([r[k] for r in res]) for k in res[0]}
+    samples["building"] = np.concatenate([np.full(len(r["cls"]), names.index(j.building)) for j, r in zip(jobs, res)])
+    fit = fit_boxfit(samples, list(codes))
+    fit.report["min_iou"] = BOXFIT_MIN_IOU
+    on = [ELEMENT_CLASSES[c] for c in range(N_CLASSES) if fit.enabled[c]]
+    say(f"box regression: {len(samples['cls'])} matched detections; used for {', '.join(on) or 'no class'}")
+    return fit
 
 
 def _fit_class(s: Samples, mask: np.ndarray, settings: TrainSettings) -> SVMFit:

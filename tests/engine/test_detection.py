@@ -248,3 +248,36 @@ def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path, choice)
         assert max(errors) < 0.05, errors
     else:
         assert max(errors) >= 0.05, errors
+
+
+def test_a_models_box_regression_moves_its_classes_detections(buildings, trained):
+    """Detection applies the model's learned box regression (engine.boxfit) to the classes it is enabled for,
+    after the rules, and ``box-fit: false`` turns it off."""
+    import dataclasses
+
+    from engine import boxfit as bf
+    from engine.detection import detect_space
+    from engine.spacedata import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    coef = np.zeros((12, 3, 2, bf.N_FEATURES + 1))
+    coef[CLASS_CODES["wall"], 2, :, -1] = [0.1, -0.1]  # walls: bottom up and top down by a tenth of their height
+    enabled = np.zeros(12, bool)
+    enabled[CLASS_CODES["wall"]] = True
+    moved = dataclasses.replace(trained, boxfit=bf.BoxFit(coef, enabled))
+    plain = detect_space(pts, trained, DetectionSettings.from_config())
+    fitted = detect_space(pts, moved, DetectionSettings.from_config())
+    off = detect_space(pts, moved, DetectionSettings.from_config(box_fit=False))
+    assert [p.class_code for p in plain] == [p.class_code for p in fitted] and len(plain) > 3
+    walls = 0
+    for a, b, c in zip(plain, fitted, off):
+        np.testing.assert_allclose(c.world_size, a.world_size)
+        if a.class_name == "wall":
+            walls += 1
+            assert b.world_size[2] == pytest.approx(0.8 * a.world_size[2]) and b.center[2] == pytest.approx(a.center[2])
+        else:
+            np.testing.assert_allclose(b.world_size, a.world_size)
+    assert walls >= 2
