@@ -51,7 +51,7 @@ from engine.boxfit import box_features, face_targets, fit_boxfit
 from engine.canonical import CanonicalFrame
 from engine.detection import DetectionSettings, PointIndex, detect_in_volume, prepare_space, space_frame
 from engine.dictionary import WindowDictionary
-from engine.features import FeatureLayout, SpaceVolume, window_features
+from engine.features import ABLATIONS, FeatureLayout, SpaceVolume, window_features
 from engine.model import Model
 from engine.sliding import box_iou, grid_iou, score_windows, window_positions, window_shape
 from engine.spacedata import SpaceRef, index_spaces, load_space
@@ -97,6 +97,7 @@ class TrainSettings:
     classes: tuple[int, ...] = tuple(range(N_CLASSES))
     max_stride: float = 0.5
     box_fit: str = ""
+    select_groups: str = ""
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
@@ -116,6 +117,12 @@ class TrainSettings:
         if self.atom_scale <= 0:
             raise ValueError("atom-scale must be positive")
         self.box_fit = ",".join(element_class_list(self.box_fit, "box-fit"))
+        if isinstance(self.select_groups, (list, tuple)):
+            self.select_groups = ",".join(self.select_groups)
+        bad = [g for g in self.select_groups.split(",") if g.strip() and g.strip() not in ABLATIONS or g.strip() == "full"]
+        if bad:
+            raise ValueError(f"select-groups: unknown ablation {bad[0]!r} (known: no_local, no_global, no_color)")
+        self.select_groups = ",".join(g.strip() for g in self.select_groups.split(",") if g.strip())
 
     @property
     def box_fit_codes(self) -> list[int]:
@@ -563,18 +570,38 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
         active = tuple(c for c in active if trained[c] and (round_ == 0 or new[c] > 0))
         if round_ > 0 and not active:
             break
+    groups_report = None
+    if settings.select_groups:
+        model, groups_report = _select_groups(jobs, model, samples, settings, det_run, client, say)
     if any(model.trained[c] for c in settings.box_fit_codes):
         model.boxfit = _train_boxfit(jobs, model, det_run, settings, client, say)
     model.detection = det_run.to_json()
     model.svm = {"estimator": "sklearn.svm.LinearSVC (liblinear)", "C": settings.c, "class_weight": "balanced",
                  "loss": "squared_hinge", "settings": settings.to_json(), "rounds": history,
-                 "atom_weights": settings.atom_weights, "atom_scale": settings.atom_scale}
+                 "atom_weights": settings.atom_weights, "atom_scale": settings.atom_scale, "groups": groups_report}
     model.provenance = dict(provenance or {})
     model.provenance.update({"spaces": len(jobs), "instances": int(len(cls)),
                              "buildings": sorted({j.building for j in jobs}),
                              "instances_per_class": {ELEMENT_CLASSES[c]: int((cls == c).sum()) for c in range(N_CLASSES)}})
     say(f"trained in {time.perf_counter() - t0:.0f} s")
     return model, samples
+
+
+def _select_groups(jobs: list[TrainJob], model: Model, samples: dict[int, Samples], settings: TrainSettings,
+                   det: DetectionSettings, client, say) -> tuple[Model, dict[str, Any]]:
+    """Per-class feature groups by building-wise validation (:mod:`engine.groups`); the model with them."""
+    from engine import groups
+
+    inner = dataclasses.replace(settings, select_groups="", box_fit="")
+    candidates = tuple(settings.select_groups.split(","))
+    ap = groups.validation_ap(
+        jobs, lambda tj: train_with_samples([], client=client, settings=inner, detection=det, jobs=tj),
+        candidates, settings, det, client=client, say=say)
+    chosen = groups.choose_groups(ap)
+    say("feature groups: " + (", ".join(f"{c} {v}" for c, v in chosen.items()) or "every class keeps all"))
+    report = {"candidates": list(candidates), "folds": groups.FOLDS, "margin": groups.MARGIN, "min_gt": groups.MIN_GT,
+              "validation_ap": ap, "chosen": chosen}
+    return groups.apply_groups(model, samples, chosen, settings), report
 
 
 def _boxfit_task(job: TrainJob, model: Model, det: DetectionSettings, codes: tuple[int, ...],

@@ -54,6 +54,10 @@ def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained
     assert (settings.relative_ratio, settings.mining) == (shipped["relative_ratio"], shipped["mining"]) == (0.5, "hardest")
     assert (settings.atom_weights, settings.atom_scale) == (shipped["atom_weights"], shipped["atom_scale"]) == (True, 0.5)
     assert load_model(None).atom_weights is not None
+    # per-class feature groups validated on folds, and the learned box regression: the shipped model has both
+    assert (settings.select_groups, settings.box_fit) == (shipped["select_groups"], shipped["box_fit"])
+    assert settings.select_groups and settings.box_fit
+    assert load_model(None).boxfit is not None and load_model(None).svm["groups"]["chosen"]
     assert model.dictionary.relative_ratio == 0.5 and model.svm["settings"]["mining"] == "hardest"
     with dask.config.set({"buildingparser.detection.train.relative-ratio": None,
                           "buildingparser.detection.train.mining": "random"}):
