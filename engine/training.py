@@ -592,8 +592,11 @@ def _select_groups(jobs: list[TrainJob], model: Model, samples: dict[int, Sample
     """Per-class feature groups by building-wise validation (:mod:`engine.groups`); the model with them."""
     from engine import groups
 
-    inner = dataclasses.replace(settings, select_groups="", box_fit="")
     candidates = tuple(settings.select_groups.split(","))
+    if len({j.building for j in jobs}) < groups.FOLDS:
+        say("feature groups: one building, nothing to validate on: every class keeps all")
+        return model, {"candidates": list(candidates), "skipped": "fewer buildings than folds", "chosen": {}}
+    inner = dataclasses.replace(settings, select_groups="", box_fit="")
     ap = groups.validation_ap(
         jobs, lambda tj: train_with_samples([], client=client, settings=inner, detection=det, jobs=tj),
         candidates, settings, det, client=client, say=say)

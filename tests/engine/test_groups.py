@@ -68,3 +68,6 @@ def test_training_validates_groups_on_building_folds(two_buildings):
     assert set(rep["chosen"]) <= {"ceiling", "floor", "wall"}
     with pytest.raises(ValueError):
         TrainSettings(select_groups="no_walls")
+    # one building: nothing to validate on, the model keeps every group
+    one, _ = train_with_samples(two_buildings[:1], settings=settings)
+    assert one.svm["groups"]["chosen"] == {} and "skipped" in one.svm["groups"]
