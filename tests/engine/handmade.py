@@ -186,3 +186,15 @@ def point_bins(pts: np.ndarray, bw: float = BW, zb: float = ZB) -> tuple[np.ndar
     """Histogram bins (u, v, z) of points: ``bw`` across, ``zb`` in height."""
     return (np.floor(pts[:, 0] / bw).astype(np.int64), np.floor(pts[:, 1] / bw).astype(np.int64),
             np.floor(pts[:, 2] / zb).astype(np.int64))
+
+
+def generated_stores(root, seeds_yaws, rooms: int = 2, density: float = 600) -> list:
+    """Small generated buildings (engine.synth) under ``root``, one per ``(seed, yaw)``, opened as tile stores."""
+    from engine.synth import generate
+    from tiles.store import open_store
+
+    stores = []
+    for seed, yaw in seeds_yaws:
+        generate(str(root / f"b{seed}.zarr"), seed=seed, rooms=rooms, density=density, yaw=yaw)
+        stores.append(open_store(str(root / f"b{seed}.zarr")))
+    return stores

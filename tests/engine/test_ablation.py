@@ -9,18 +9,13 @@ import pytest
 from engine.ablation import check_compatible, detect_many
 from engine.detection import detect
 from engine.features import ABLATIONS
-from engine.synth import generate
 from engine.training import TrainSettings, refit_without, train_with_samples
-from tiles.store import open_store
+from tests.engine.handmade import generated_stores
 
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
-    root = tmp_path_factory.mktemp("abl")
-    stores = []
-    for seed, yaw in ((21, 15.0), (22, 50.0)):
-        generate(str(root / f"b{seed}.zarr"), seed=seed, rooms=2, density=600, yaw=yaw)
-        stores.append(open_store(str(root / f"b{seed}.zarr")))
+    stores = generated_stores(tmp_path_factory.mktemp("abl"), ((21, 15.0), (22, 50.0)))
     settings = TrainSettings.from_config(rounds=1, classes=(0, 1, 2, 8))  # ceiling, floor, wall, chair
     model, samples = train_with_samples(stores[:1], settings=settings)
     return stores, model, samples

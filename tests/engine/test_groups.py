@@ -7,10 +7,9 @@ import pytest
 
 from engine import groups
 from engine.features import ABLATIONS, FeatureLayout
-from engine.synth import generate
 from engine.training import TrainSettings, refit_without, train_with_samples
+from tests.engine.handmade import generated_stores
 from tiles.classes import ELEMENT_CLASSES
-from tiles.store import open_store
 
 
 def _ap(**per_variant):
@@ -33,12 +32,7 @@ def test_a_variant_replaces_the_full_svm_only_by_the_margin_and_with_enough_elem
 
 @pytest.fixture(scope="module")
 def two_buildings(tmp_path_factory):
-    root = tmp_path_factory.mktemp("groups")
-    stores = []
-    for seed, yaw in ((41, 10.0), (42, 35.0)):
-        generate(str(root / f"b{seed}.zarr"), seed=seed, rooms=2, density=500, yaw=yaw)
-        stores.append(open_store(str(root / f"b{seed}.zarr")))
-    return stores
+    return generated_stores(tmp_path_factory.mktemp("groups"), ((41, 10.0), (42, 35.0)), density=500)
 
 
 def test_apply_groups_refits_only_the_chosen_classes(two_buildings):
