@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.detection import (DetectionSettings, PointIndex, detect_in_volume, prepare_space, space_frame,
-                              to_proposals, top_windows)
+from engine.detection import (DetectionSettings, detect_in_volume, prepare_indexed, space_frame, to_proposals,
+                              top_windows)
 from engine.features import FeatureLayout, SpaceVolume
 from engine.model import Model
 from engine.proposals import Proposal
@@ -74,8 +74,7 @@ def detect_space_many(points: SpacePoints, models: list[Model], settings: Detect
     """Per model, the proposals of one space (as :func:`engine.detection.detect_space` gives them)."""
     if len(points.xyz) < max(settings.min_window_points, 4):
         return [[] for _ in models]
-    vol = prepare_space(points, models[0], space_frame(points))
-    index = PointIndex(vol.frame.to_metric(points.xyz), vol.grid) if settings.refine else None
+    vol, index = prepare_indexed(points, models[0], space_frame(points), settings.refine)
     origin = np.zeros(3) if origin is None else origin
     out = []
     for m, cand in zip(models, window_candidates_many(vol, models, settings)):

@@ -220,6 +220,17 @@ def prepare_space(points: SpacePoints, model: Model, frame: CanonicalFrame | Non
     return SpaceVolume.build(points.xyz, points.rgb, frame, model.voxel, model.max_cells, model.layout.colour)
 
 
+def prepare_indexed(points: SpacePoints, model: Model, frame: CanonicalFrame,
+                    with_index: bool = True) -> tuple[SpaceVolume, PointIndex | None]:
+    """A space's integral volume and (``with_index``) its voxel-sorted point index, from one pass of
+    preparation: canonical points and their voxels, shared by the moments and the index."""
+    metric = frame.to_metric(points.xyz)
+    grid = mom.VoxelGrid.covering(frame.extent, model.voxel, model.max_cells)
+    flat = grid.flat_index(metric)
+    vol = SpaceVolume.from_metric(metric, points.rgb, frame, grid, model.layout.colour, flat)
+    return vol, (PointIndex(metric, grid, flat) if with_index else None)
+
+
 def local_search(vol: SpaceVolume, lo: np.ndarray, hi: np.ndarray, scores: np.ndarray, weights: np.ndarray,
                  bias: np.ndarray | float, layout, stride: float, max_stride: float | None) -> tuple[np.ndarray,
                                                                                                   np.ndarray,
@@ -461,13 +472,7 @@ def detect_space(points: SpacePoints, model: Model, settings: DetectionSettings 
     settings = settings or DetectionSettings.from_config()
     if len(points.xyz) < max(settings.min_window_points, 4):
         return []
-    # one pass of preparation: canonical points and their voxels, shared by the moments and the index
-    frame = space_frame(points, connection)
-    metric = frame.to_metric(points.xyz)
-    grid = mom.VoxelGrid.covering(frame.extent, model.voxel, model.max_cells)
-    flat = grid.flat_index(metric)
-    vol = SpaceVolume.from_metric(metric, points.rgb, frame, grid, model.layout.colour, flat)
-    index = PointIndex(metric, grid, flat) if settings.refine else None
+    vol, index = prepare_indexed(points, model, space_frame(points, connection), settings.refine)
     det = detect_in_volume(vol, model, settings, index)
     return to_proposals(det, vol, model, points.space_id, np.zeros(3) if origin is None else origin)
 

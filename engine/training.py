@@ -49,7 +49,7 @@ from engine import config
 from engine import moments as mom
 from engine.boxfit import box_features, face_targets, fit_boxfit
 from engine.canonical import CanonicalFrame
-from engine.detection import DetectionSettings, PointIndex, detect_in_volume, prepare_space, space_frame
+from engine.detection import DetectionSettings, detect_in_volume, prepare_indexed, prepare_space, space_frame
 from engine.dictionary import WindowDictionary
 from engine.features import ABLATIONS, FeatureLayout, SpaceVolume, window_features
 from engine.model import Model
@@ -613,11 +613,7 @@ def _boxfit_task(job: TrainJob, model: Model, det: DetectionSettings, codes: tup
     with their box-regression features and the faces of that element (:mod:`engine.boxfit`)."""
     pts = load_space(job.store, job.ref, "gt_space", truth=True)
     frame = CanonicalFrame.from_json(job.frame) if job.frame else space_frame(pts)
-    metric = frame.to_metric(pts.xyz)
-    grid = mom.VoxelGrid.covering(frame.extent, model.voxel, model.max_cells)
-    flat = grid.flat_index(metric)
-    vol = SpaceVolume.from_metric(metric, pts.rgb, frame, grid, model.layout.colour, flat)
-    index = PointIndex(metric, grid, flat)
+    vol, index = prepare_indexed(pts, model, frame)
     d = detect_in_volume(vol, model, det, index, classes=list(codes))
     gt = _canonical_gt(job, vol, pts.gt_instance)
     rows, match = [], []
@@ -637,12 +633,12 @@ def _boxfit_task(job: TrainJob, model: Model, det: DetectionSettings, codes: tup
 
 def _train_boxfit(jobs: list[TrainJob], model: Model, det: DetectionSettings, settings: TrainSettings, client,
                   say) -> Any:
-    """The box regressions (:func:`engine.boxfit.fit_boxfit`) from the trained detectors' own detections
-    in the training spaces (without the one-per-space and refined surface classes, which have rules)."""
+    """The box regressions (:func:`engine.boxfit.fit_boxfit`) of the ``box-fit`` classes, from the trained
+    detectors' own detections in the training spaces."""
     codes = tuple(c for c in settings.box_fit_codes if model.trained[c])
     # a looser NMS than at run time: the near misses beside each element, which the regression is to
     # fix on new buildings, are in the samples too (the kept detections alone fit the training
-    # elements too well to teach it: 1,089 samples against 365 on the shipped model's data)
+    # elements too well to teach it: about three times as many samples on the shipped model's data)
     det = dataclasses.replace(det, nms_iou=BOXFIT_NMS_IOU, max_per_class=max(det.max_per_class, 100))
     res = run_tasks(_boxfit_task, jobs, client=client, label="box regression samples",
                     keys=[f"space {j.key}" for j in jobs], extra_args=(model, det, codes, BOXFIT_MIN_IOU))
