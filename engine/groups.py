@@ -17,6 +17,7 @@ columns: the model keeps one feature layout).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -83,10 +84,13 @@ def validation_ap(jobs: list[Any], samples_model, candidates: tuple[str, ...], s
     return out
 
 
-def choose_groups(ap: dict[str, dict[str, Any]]) -> dict[str, str]:
-    """Per class name, the variant chosen from :func:`validation_ap`'s result (only where it is not ``"full"``)."""
+def choose_groups(ap: dict[str, dict[str, Any]], classes: Sequence[str] | None = None) -> dict[str, str]:
+    """Per class name (of ``classes``, default all), the variant chosen from :func:`validation_ap`'s result
+    (only where it is not ``"full"``)."""
     chosen = {}
     for c in ELEMENT_CLASSES:
+        if classes is not None and c not in classes:
+            continue
         if ap["full"]["n_gt"].get(c, 0) < MIN_GT:
             continue
         score = {v: (-1.0 if ap[v][c] is None else ap[v][c]) for v in ap}

@@ -98,6 +98,7 @@ class TrainSettings:
     max_stride: float = 0.5
     box_fit: str = ""
     select_groups: str = ""
+    group_classes: str = ""
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
@@ -117,6 +118,7 @@ class TrainSettings:
         if self.atom_scale <= 0:
             raise ValueError("atom-scale must be positive")
         self.box_fit = ",".join(element_class_list(self.box_fit, "box-fit"))
+        self.group_classes = ",".join(element_class_list(self.group_classes, "group-classes"))
         if isinstance(self.select_groups, (list, tuple)):
             self.select_groups = ",".join(self.select_groups)
         bad = [g for g in self.select_groups.split(",") if g.strip() and g.strip() not in ABLATIONS or g.strip() == "full"]
@@ -600,9 +602,9 @@ def _select_groups(jobs: list[TrainJob], model: Model, samples: dict[int, Sample
     ap = groups.validation_ap(
         jobs, lambda tj: train_with_samples([], client=client, settings=inner, detection=det, jobs=tj),
         candidates, settings, det, client=client, say=say)
-    chosen = groups.choose_groups(ap)
+    chosen = groups.choose_groups(ap, settings.group_classes.split(",") if settings.group_classes else None)
     say("feature groups: " + (", ".join(f"{c} {v}" for c, v in chosen.items()) or "every class keeps all"))
-    report = {"candidates": list(candidates), "folds": groups.FOLDS, "margin": groups.MARGIN, "min_gt": groups.MIN_GT,
+    report = {"candidates": list(candidates), "classes": settings.group_classes or "all", "folds": groups.FOLDS, "margin": groups.MARGIN, "min_gt": groups.MIN_GT,
               "validation_ap": ap, "chosen": chosen}
     return groups.apply_groups(model, samples, chosen, settings), report
 

@@ -28,6 +28,8 @@ def test_a_variant_replaces_the_full_svm_only_by_the_margin_and_with_enough_elem
     chosen = groups.choose_groups(ap)
     # doors: the best variant; chairs: +4 points is under the margin; sofas: too few elements
     assert chosen == {"door": "no_color", "table": "no_local"}
+    # only the classes allowed to drop a group
+    assert groups.choose_groups(ap, ["door", "chair"]) == {"door": "no_color"}
 
 
 @pytest.fixture(scope="module")

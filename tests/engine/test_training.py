@@ -55,7 +55,10 @@ def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained
     assert (settings.atom_weights, settings.atom_scale) == (shipped["atom_weights"], shipped["atom_scale"]) == (True, 0.5)
     assert load_model(None).atom_weights is not None
     # per-class feature groups validated on folds, and the learned box regression: the shipped model has both
-    assert (settings.select_groups, settings.box_fit) == (shipped["select_groups"], shipped["box_fit"])
+    assert (settings.select_groups, settings.box_fit, settings.group_classes) == (
+        shipped["select_groups"], shipped["box_fit"], shipped["group_classes"])
+    # the walls the space update needs keep all their groups
+    assert "wall" not in settings.group_classes.split(",") and "wall" not in load_model(None).svm["groups"]["chosen"]
     assert settings.select_groups and settings.box_fit
     assert load_model(None).boxfit is not None and load_model(None).svm["groups"]["chosen"]
     assert model.dictionary.relative_ratio == 0.5 and model.svm["settings"]["mining"] == "hardest"
