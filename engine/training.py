@@ -604,8 +604,8 @@ def _select_groups(jobs: list[TrainJob], model: Model, samples: dict[int, Sample
         candidates, settings, det, client=client, say=say)
     chosen = groups.choose_groups(ap, settings.group_classes.split(",") if settings.group_classes else None)
     say("feature groups: " + (", ".join(f"{c} {v}" for c, v in chosen.items()) or "every class keeps all"))
-    report = {"candidates": list(candidates), "classes": settings.group_classes or "all", "folds": groups.FOLDS, "margin": groups.MARGIN, "min_gt": groups.MIN_GT,
-              "validation_ap": ap, "chosen": chosen}
+    report = {"candidates": list(candidates), "classes": settings.group_classes or "all", "folds": groups.FOLDS,
+              "margin": groups.MARGIN, "min_gt": groups.MIN_GT, "validation_ap": ap, "chosen": chosen}
     return groups.apply_groups(model, samples, chosen, settings), report
 
 
