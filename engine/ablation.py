@@ -14,11 +14,13 @@ rounding of the scores (tested).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from engine.detection import (DetectionSettings, detect_in_volume, prepare_indexed, space_frame, to_proposals,
                               top_windows)
-from engine.features import FeatureLayout, SpaceVolume
+from engine.features import SpaceVolume
 from engine.model import Model
 from engine.proposals import Proposal
 from engine.sliding import score_windows_many, window_shape
@@ -48,7 +50,7 @@ def window_candidates_many(vol: SpaceVolume, models: list[Model],
     m0 = models[0]
     grid = vol.grid
     # weights zero on each model's disabled groups: one layout without any disabled group scores them all
-    full = FeatureLayout(m0.layout.k, (), m0.layout.min_points, m0.layout.colour, m0.layout.boundary)
+    full = dataclasses.replace(m0.layout, disabled=())
     groups: dict[tuple[int, ...], list[tuple[int, int]]] = {}
     for ai, atom in enumerate(m0.dictionary.atoms_):
         shape = tuple(int(v) for v in window_shape(atom.size_in(grid.extent), grid))

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from engine.ablation import detect_space_many
-from engine.features import ABLATIONS, FeatureLayout
+from engine.features import ABLATIONS
 from engine.metrics.detection import evaluate_detections_serial
 from engine.model import Model
 from engine.spacedata import load_space
@@ -113,8 +113,7 @@ def apply_groups(model: Model, samples: dict[int, Any], chosen: dict[str, str], 
         s = samples.get(c)
         if not model.trained[c] or s is None or not s.pos or not s.neg:
             continue
-        mask = FeatureLayout(lay.k, tuple(dict.fromkeys(lay.disabled + ABLATIONS[variant])), lay.min_points,
-                             lay.colour, lay.boundary).mask
+        mask = lay.without(ABLATIONS[variant]).mask
         fit = _fit_class(s, mask, settings)
         weights[c], bias[c] = fit.weights, fit.bias
         if atom_w is not None:

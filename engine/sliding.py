@@ -36,7 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine import moments as mom
-from engine.features import LOCAL_SIZE, FeatureLayout, SpaceVolume, global_scores, local_features, sub_bounds
+from engine.features import (LOCAL_SIZE, FeatureLayout, SpaceVolume, context_features, context_margin,
+                             global_scores, local_features, slab_interval, sub_bounds)
 
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000
@@ -208,7 +209,7 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
     m = len(w)
     bias = np.asarray(bias, dtype=np.float64).reshape(m)
     wg = w[:, :layout.n_global]
-    wl = w[:, layout.n_global:].reshape(m, k3, -1)  # (m, K^3, 9) per slot, x-major
+    wl = w[:, layout.n_global:layout.local_end].reshape(m, k3, -1)  # (m, K^3, 9) per slot, x-major
     px, py, pz = window_positions(grid, shape, stride, max_stride)
     ux, ix = _intervals(px, int(shape[0]), k)
     uy, iy = _intervals(py, int(shape[1]), k)
@@ -250,9 +251,40 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
         part = local_features(sums, np.ones(len(sums)), k, layout.min_points)
         part[:, 1] = sums[:, 0]  # raw count: ratio = count / window count
         acc[:, sl] += _slot_sums((len(xs), len(uy), len(uz)), occ, part, (sub_ix, iy, iz), w2, k)
+    if layout.context and np.any(w[:, layout.local_end:]):
+        acc[:m] += _context_scores(vol, (win(px, shape[0]), win(py, shape[1]), win(pz, shape[2])),
+                                   w[:, layout.local_end:])
     n_win = np.maximum(counts, 1.0)
     return [WindowScores(shape, px, py, pz, np.where(valid, acc[j] + acc[m + j] / n_win * k3, -np.inf),
                          counts) for j in range(m)]
+
+
+def _context_scores(vol: SpaceVolume, wins: tuple[np.ndarray, np.ndarray, np.ndarray],
+                    weights: np.ndarray) -> np.ndarray:
+    """The context block's share ``(m, nx, ny, nz)`` of the scores of windows at ``wins`` (per-axis intervals).
+
+    The window's and its six slabs' sums are separable box sums (:func:`engine.moments.box_sums_grid`),
+    taken in batches of x positions.
+    """
+    civ = vol.context_iv
+    n = vol.grid.shape
+    g = context_margin(vol.grid.voxel)
+    slabs = [[slab_interval(wins[a], side, int(g[a]), int(n[a])) for side in (-1, 1)] for a in range(3)]
+    per_x = max(1, SUBBOX_BATCH // max(len(wins[1]) * len(wins[2]), 1))
+    out = np.empty((len(weights), len(wins[0]), len(wins[1]), len(wins[2])))
+    for s in range(0, len(wins[0]), per_x):
+        sl = slice(s, s + per_x)
+        cut = (wins[0][sl], wins[1], wins[2])
+        window = mom.box_sums_grid(civ, *cut)
+        sides = []
+        for a in range(3):
+            for iv in slabs[a]:
+                axes = list(cut)
+                axes[a] = iv[sl] if a == 0 else iv
+                sides.append(mom.box_sums_grid(civ, *axes))
+        feats = context_features(window, np.stack(sides, axis=-2))
+        out[:, sl] = np.einsum("xyzf,mf->mxyz", feats, weights)
+    return out
 
 
 def box_iou(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.ndarray) -> np.ndarray:

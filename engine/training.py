@@ -99,6 +99,7 @@ class TrainSettings:
     box_fit: str = ""
     select_groups: str = ""
     group_classes: str = ""
+    context: bool = True
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
@@ -498,7 +499,7 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
     jobs = jobs if jobs is not None else training_jobs(stores, client=client, building_names=names)
     if not jobs:
         raise UserError(None, "no ground-truth spaces to train on")
-    layout = FeatureLayout(settings.k, settings.disabled)
+    layout = FeatureLayout(settings.k, settings.disabled, context=settings.context)
     inst = run_tasks(_instances_task, jobs, client=client, label="training instances",
                      keys=[f"space {j.key}" for j in jobs], extra_args=(settings,))
     cls = np.concatenate([r["cls"] for r in inst])
@@ -684,8 +685,7 @@ def refit_without(model: Model, samples: dict[int, Samples], disabled: tuple[str
         settings = TrainSettings(c=float(kw.get("c", 0.05)), seed=int(kw.get("seed", 0)),
                                  atom_weights=bool(kw.get("atom_weights", False)),
                                  atom_scale=float(kw.get("atom_scale", 1.0)))
-    layout = FeatureLayout(model.layout.k, tuple(dict.fromkeys(model.layout.disabled + tuple(disabled))),
-                           model.layout.min_points, model.layout.colour, model.layout.boundary)
+    layout = model.layout.without(disabled)
     weights, bias = np.zeros_like(model.weights), np.zeros_like(model.bias)
     n_atoms = len(model.dictionary.atoms_)
     atom_w, atom_b = np.zeros((n_atoms, layout.size)), np.zeros(n_atoms)

@@ -60,6 +60,8 @@ def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained
     # the walls the space update needs keep all their groups
     assert "wall" not in settings.group_classes.split(",") and "wall" not in load_model(None).svm["groups"]["chosen"]
     assert settings.select_groups and settings.box_fit
+    # the context block: configured, and in the shipped model's layout
+    assert settings.context and shipped["context"] and load_model(None).layout.context and model.layout.context
     assert load_model(None).boxfit is not None and load_model(None).svm["groups"]["chosen"]
     assert model.dictionary.relative_ratio == 0.5 and model.svm["settings"]["mining"] == "hardest"
     with dask.config.set({"buildingparser.detection.train.relative-ratio": None,
