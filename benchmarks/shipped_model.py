@@ -7,7 +7,7 @@ The README's table of the shipped model comes from this script::
 
 Buildings are generated like the training ones (``engine.synth.generate`` with
 ``engine.training.synthetic_yaw(seed)``) with seeds the model was not trained on
-(``make model`` trains the detectors on 1000-1009 and the CRF on 5000-5001); each
+(``make model`` trains the detectors on 1000-1019 and the CRF on 5000-5001); each
 space is detected on its ground-truth points and scored with VOC AP at 3D IoU
 0.5 four ways: all proposals ranked by the detector's score, the detector's own
 set (score > 0), the set the CRF keeps, and all proposals ranked by the CRF's
