@@ -23,6 +23,9 @@ window shape is computed at once (:func:`score_windows`):
   about a tenth of the terms of all windows times all slots); the ratio
   feature is linear in the sub-box count, divided by the window's count at the
   end; the global features are computed per position that holds enough points;
+* the context block (layouts with ``context``) comes per position from the box
+  sums of the window and of its six slabs, seven separable look-ups
+  (:func:`_context_scores`);
 * :func:`score_windows_many` does this for several linear models of one window
   shape at once (the features are computed once).
 
