@@ -461,17 +461,18 @@ class SpaceVolume:
     @property
     def count_iv(self) -> np.ndarray:
         """The integral volume of point counts alone ``(nx+1, ny+1, nz+1, 1)``, contiguous (made once)."""
-        cached = self.__dict__.get("_count_iv")
-        if cached is None or cached[0] is not self.iv:
-            cached = self.__dict__["_count_iv"] = (self.iv, np.ascontiguousarray(self.iv[..., :1]))
-        return cached[1]
+        return self._channels_iv("_count_iv", (0,))
 
     @property
     def context_iv(self) -> np.ndarray:
         """The integral volume of :data:`CONTEXT_CHANNELS` alone ``(nx+1, ny+1, nz+1, 4)``, contiguous (made once)."""
-        cached = self.__dict__.get("_context_iv")
+        return self._channels_iv("_context_iv", CONTEXT_CHANNELS)
+
+    def _channels_iv(self, key: str, channels: tuple[int, ...]) -> np.ndarray:
+        """A contiguous copy of some channels of ``iv``, cached under ``key`` until ``iv`` is replaced."""
+        cached = self.__dict__.get(key)
         if cached is None or cached[0] is not self.iv:
-            cached = self.__dict__["_context_iv"] = (self.iv, np.ascontiguousarray(self.iv[..., list(CONTEXT_CHANNELS)]))
+            cached = self.__dict__[key] = (self.iv, np.ascontiguousarray(self.iv[..., list(channels)]))
         return cached[1]
 
     @classmethod
