@@ -18,9 +18,10 @@ and CP-SAT solves it about 1.5x faster.
 
 Choices made here, beyond the paper's text:
 
-* **Unary term.** ``w0 * l_v`` from the detector's SVM score ``l_v`` plus a bias
-  ``b_c`` per class (the paper has ``w0`` only), so the CRF can learn a
-  threshold per class.
+* **Unary term.** ``w0 * l_v`` from the detector's score ``l_v`` (the SVM's, or the
+  log-odds of the model's learned re-ranking for the classes it is used for,
+  :mod:`engine.rescore`) plus a bias ``b_c`` per class (the paper has ``w0`` only),
+  so the CRF can learn a threshold per class.
 * **Edge features.** ``Phi_uv = [B_u, B_v, S_u, S_v, |P_u - P_v|, 1, IoU_uv]``:
   the paper's occupancy patterns (flattened K^3, scaled by ``1/sqrt(K^3)`` so
   that each block has norm at most 1), sizes and absolute position difference in

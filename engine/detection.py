@@ -32,7 +32,10 @@ For every space (one task each, its points gathered from the tiles it touches):
    index, not a search;
 6. the model's learned box regression, if it has one (:mod:`engine.boxfit`, ``box-fit``):
    the classes it was validated for have their faces moved by it;
-7. the proposals, mapped back to world coordinates through the frame
+7. the model's learned re-ranking, if it has one (:mod:`engine.rescore`, ``rescore``): the
+   classes it was validated for take its log-odds, from the points around their final boxes,
+   as their score;
+8. the proposals, mapped back to world coordinates through the frame
    (:class:`engine.proposals.Proposal`: unit-cube P, S, B plus the world box).
 
 Settings: ``buildingparser.detection.*`` (``engine/detection.yaml``).
@@ -83,6 +86,7 @@ class DetectionSettings:
     refine_bin: float = 0.005
     label_margin: float = 0.02
     box_fit: bool = True
+    rescore: bool = True
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -399,7 +403,11 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         refine_reveals(lo, hi, lo_m, hi_m, cls_all, grid, index)  # doors' depth, columns' sides
         if model.boxfit is not None and settings.box_fit:
             model.boxfit.apply(lo_m, hi_m, cls_all, index.points_in_metric, np.asarray(vol.frame.extent, float))
-    return Detections(lo, hi, lo_m, hi_m, np.concatenate(sc_all), cls_all, at_all_cat)
+    score = np.concatenate(sc_all)
+    if settings.refine and index is not None and model.rescorer is not None and settings.rescore:
+        score = model.rescorer.apply(score, cls_all, lo_m, hi_m, index.points_in_metric,
+                                     np.asarray(vol.frame.extent, float))
+    return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat)
 
 
 def surface_order(keep: np.ndarray, lo: np.ndarray, hi: np.ndarray, nz: int, upper: bool,

@@ -44,10 +44,12 @@ def _validation_task(job: Any, models: list[Model], det: Any) -> list[list[Any]]
 
 
 def validation_ap(jobs: list[Any], samples_model, candidates: tuple[str, ...], settings: Any, det: Any,
-                  client=None, say=None) -> dict[str, dict[str, float]]:
+                  client=None, say=None, folds: list | None = None) -> dict[str, dict[str, float]]:
     """Per variant (``"full"`` and each candidate ablation), the per-class AP on building-wise folds.
 
-    ``samples_model(train_jobs)`` trains on some jobs and returns ``(model, samples)``.
+    ``samples_model(train_jobs)`` trains on some jobs and returns ``(model, samples)``.  When
+    ``folds`` is a list, each fold's held-out buildings and its models (``"full"`` then the
+    candidates, in that order) are appended to it as ``(set_of_buildings, [models])``.
     """
     from engine.training import refit_without
 
@@ -65,6 +67,8 @@ def validation_ap(jobs: list[Any], samples_model, candidates: tuple[str, ...], s
         say(f"feature groups: fold {k + 1}/{FOLDS}, training on {len(buildings) - len(held)} buildings")
         model, samples = samples_model(train_jobs)
         models = [model] + [refit_without(model, samples, ABLATIONS[v], settings) for v in candidates]
+        if folds is not None:
+            folds.append((held, models))
         res = run_tasks(_validation_task, test_jobs, client=client, label=f"feature groups, fold {k + 1}",
                         keys=[f"space {j.key}" for j in test_jobs], extra_args=(models, det))
         for j, r in zip(test_jobs, res):
@@ -98,6 +102,23 @@ def choose_groups(ap: dict[str, dict[str, Any]], classes: Sequence[str] | None =
         if best is not None and score[best] >= max(score["full"], 0.0) + MARGIN:
             chosen[c] = best
     return chosen
+
+
+def compose_chosen(models: list[Model], variants: Sequence[str], chosen: dict[str, str]) -> Model:
+    """The first (``"full"``) model with each chosen class's SVM rows, shared and per-window, taken from the
+    model of its variant (``models[i]`` was refitted without ``variants[i]``'s groups, as :func:`apply_groups`
+    refits them)."""
+    full = models[0]
+    weights, bias = full.weights.copy(), full.bias.copy()
+    atom_w = None if full.atom_weights is None else full.atom_weights.copy()
+    atom_b = None if full.atom_bias is None else full.atom_bias.copy()
+    for name, variant in chosen.items():
+        c, m = ELEMENT_CLASSES.index(name), models[list(variants).index(variant)]
+        weights[c], bias[c] = m.weights[c], m.bias[c]
+        if atom_w is not None:
+            rows = [a for a, atom in enumerate(full.dictionary.atoms_) if atom.class_code == c]
+            atom_w[rows], atom_b[rows] = m.atom_weights[rows], m.atom_bias[rows]
+    return dataclasses.replace(full, weights=weights, bias=bias, atom_weights=atom_w, atom_bias=atom_b)
 
 
 def apply_groups(model: Model, samples: dict[int, Any], chosen: dict[str, str], settings: Any) -> Model:

@@ -19,16 +19,23 @@
                                           regression's weights on the F point features then its intercept
                                           (engine.boxfit)
     boxfit_enabled    bool    (12,)       optional (version 3): the class's detections are moved by it
+    rescore_mean      float64 (12, F)     optional (version 4): per class, the re-ranking's feature means
+    rescore_scale     float64 (12, F)     optional (version 4): ... and standard deviations (engine.rescore)
+    rescore_coef      float64 (12, F)     optional (version 4): per class, the logistic re-ranking's weights on the
+                                          standardised features
+    rescore_bias      float64 (12,)       optional (version 4): ... and its intercept
+    rescore_enabled   bool    (12,)       optional (version 4): the class's detections take the re-ranked score
     crf_*             any                 the CRF's arrays (engine.crf.CRFWeights.to_arrays), stored as given
 
 ``<stem>.json``::
 
-    {"format": "buildingparser-detector", "version": 1 (2 with atom_weights, 3 with boxfit_*), "classes": [...12 names...],
+    {"format": "buildingparser-detector", "version": 1 (2 with atom_weights, 3 with boxfit_*, 4 with rescore_*),
+     "classes": [...12 names...],
      "layout": FeatureLayout.to_json(), "voxel": metres, "max_cells": int, "stride": fraction,
      "detection": {...the detection settings the model was trained with...},
      "dictionary": WindowDictionary.params(), "svm": {...}, "provenance": {...}, "cv": {...} | null,
      "crf": {...the CRF's JSON parameters...} | null, "boxfit": {...its validation report...} | null,
-     "arrays": {name: description}}
+     "rescore": {...the re-ranking's validation report...} | null, "arrays": {name: description}}
 
 The CRF engineer's slot: :attr:`Model.crf` (JSON) and :attr:`Model.crf_arrays`
 (arrays whose names start with ``crf_``) are written and read back unchanged.
@@ -43,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from engine.boxfit import BoxFit
+from engine.rescore import Rescorer
 from engine.dictionary import WindowDictionary
 from engine.features import FeatureLayout
 from tiles.classes import ELEMENT_CLASSES
@@ -50,8 +58,8 @@ from tiles.errors import UserError
 
 FORMAT = "buildingparser-detector"
 #: The newest version this code reads; a model is written as version 1, 2 with per-window weights, 3 with a
-#: learned box regression.
-VERSION = 3
+#: learned box regression, 4 with a learned re-ranking.
+VERSION = 4
 ARRAY_DOCS = {
     "weights": "float64 (12, D): linear SVM weights per element class, zero on disabled feature groups",
     "bias": "float64 (12,): SVM intercept per class",
@@ -67,6 +75,11 @@ ARRAY_DOCS = {
     "boxfit_coef": "float64 (12, 3, 2, F + 1): box regression weights per class, axis role (thinner horizontal, "
                    "wider horizontal, vertical) and face (towards the space's nearer end first), intercept last",
     "boxfit_enabled": "bool (12,): the class's detections are moved by the box regression",
+    "rescore_mean": "float64 (12, F): re-ranking feature means per class (engine.rescore.rescore_features)",
+    "rescore_scale": "float64 (12, F): re-ranking feature standard deviations per class",
+    "rescore_coef": "float64 (12, F): logistic re-ranking weights per class on the standardised features",
+    "rescore_bias": "float64 (12,): logistic re-ranking intercept per class",
+    "rescore_enabled": "bool (12,): the class's detections take the re-ranked score (log-odds)",
 }
 
 
@@ -105,6 +118,7 @@ class Model:
     atom_weights: np.ndarray | None = None  # (A, D)
     atom_bias: np.ndarray | None = None  # (A,)
     boxfit: BoxFit | None = None  # learned box regression (engine.boxfit)
+    rescorer: Rescorer | None = None  # learned re-ranking of the final boxes (engine.rescore)
 
     def __post_init__(self) -> None:
         self.weights = np.asarray(self.weights, dtype=np.float64)
@@ -145,6 +159,8 @@ class Model:
             out.update(atom_weights=self.atom_weights, atom_bias=self.atom_bias)
         if self.boxfit is not None:
             out.update(self.boxfit.to_arrays())
+        if self.rescorer is not None:
+            out.update(self.rescorer.to_arrays())
         out.update(self.dictionary.to_arrays())
         out.update(self.crf_arrays)
         return out
@@ -156,12 +172,16 @@ class Model:
             docs = {k: v for k, v in docs.items() if not k.startswith("atom_weights") and k != "atom_bias"}
         if self.boxfit is None:
             docs = {k: v for k, v in docs.items() if not k.startswith("boxfit_")}
-        version = 3 if self.boxfit is not None else 1 if self.atom_weights is None else 2
+        if self.rescorer is None:
+            docs = {k: v for k, v in docs.items() if not k.startswith("rescore_")}
+        version = 4 if self.rescorer is not None else 3 if self.boxfit is not None else \
+            1 if self.atom_weights is None else 2
         return {"format": FORMAT, "version": version, "classes": list(ELEMENT_CLASSES),
                 "layout": self.layout.to_json(), "voxel": self.voxel, "max_cells": self.max_cells,
                 "stride": self.stride, "detection": self.detection, "dictionary": self.dictionary.params(),
                 "svm": self.svm, "provenance": self.provenance, "cv": self.cv, "crf": self.crf,
-                "boxfit": None if self.boxfit is None else self.boxfit.report, "arrays": docs}
+                "boxfit": None if self.boxfit is None else self.boxfit.report,
+                "rescore": None if self.rescorer is None else self.rescorer.report, "arrays": docs}
 
     def save(self, path: str | os.PathLike) -> tuple[str, str]:
         """Write ``<stem>.npz`` and ``<stem>.json``; returns their paths."""
@@ -209,7 +229,8 @@ class Model:
                        crf=params.get("crf"),
                        crf_arrays={k: v for k, v in arrays.items() if k.startswith("crf_")},
                        atom_weights=arrays.get("atom_weights"), atom_bias=arrays.get("atom_bias"),
-                       boxfit=BoxFit.from_arrays(arrays, params.get("boxfit")))
+                       boxfit=BoxFit.from_arrays(arrays, params.get("boxfit")),
+                       rescorer=Rescorer.from_arrays(arrays, params.get("rescore")))
         except (KeyError, ValueError) as exc:
             raise UserError(stem + ".npz", f"incomplete or inconsistent model ({exc})") from None
 

@@ -53,6 +53,7 @@ from engine.detection import DetectionSettings, detect_in_volume, prepare_indexe
 from engine.dictionary import WindowDictionary
 from engine.features import ABLATIONS, FeatureLayout, SpaceVolume, window_features
 from engine.model import Model
+from engine.rescore import fit_rescorer, rescore_features
 from engine.sliding import box_iou, grid_iou, score_windows, window_positions, window_shape
 from engine.spacedata import SpaceRef, index_spaces, load_space
 from tiles.classes import ELEMENT_CLASSES, element_class_list
@@ -100,6 +101,7 @@ class TrainSettings:
     select_groups: str = ""
     group_classes: str = ""
     context: bool = True
+    rescore: bool = False
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.voxel <= 0 or self.max_cells < 1:
@@ -573,11 +575,13 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
         active = tuple(c for c in active if trained[c] and (round_ == 0 or new[c] > 0))
         if round_ > 0 and not active:
             break
-    groups_report = None
+    groups_report, folds = None, []
     if settings.select_groups:
-        model, groups_report = _select_groups(jobs, model, samples, settings, det_run, client, say)
+        model, groups_report = _select_groups(jobs, model, samples, settings, det_run, client, say, folds)
     if any(model.trained[c] for c in settings.box_fit_codes):
         model.boxfit = _train_boxfit(jobs, model, det_run, settings, client, say)
+    if settings.rescore:
+        model.rescorer = _train_rescorer(jobs, model, folds, det_run, client, say)
     model.detection = det_run.to_json()
     model.svm = {"estimator": "sklearn.svm.LinearSVC (liblinear)", "C": settings.c, "class_weight": "balanced",
                  "loss": "squared_hinge", "settings": settings.to_json(), "rounds": history,
@@ -591,19 +595,26 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
 
 
 def _select_groups(jobs: list[TrainJob], model: Model, samples: dict[int, Samples], settings: TrainSettings,
-                   det: DetectionSettings, client, say) -> tuple[Model, dict[str, Any]]:
-    """Per-class feature groups by building-wise validation (:mod:`engine.groups`); the model with them."""
+                   det: DetectionSettings, client, say, folds: list | None = None) -> tuple[Model, dict[str, Any]]:
+    """Per-class feature groups by building-wise validation (:mod:`engine.groups`); the model with them.
+
+    ``folds``, if a list, receives each validation fold's held-out buildings and its detectors with the
+    chosen groups (``(set_of_buildings, model)``), for out-of-fold detections.
+    """
     from engine import groups
 
     candidates = tuple(settings.select_groups.split(","))
     if len({j.building for j in jobs}) < groups.FOLDS:
         say("feature groups: one building, nothing to validate on: every class keeps all")
         return model, {"candidates": list(candidates), "skipped": "fewer buildings than folds", "chosen": {}}
-    inner = dataclasses.replace(settings, select_groups="", box_fit="")
+    inner = dataclasses.replace(settings, select_groups="", box_fit="", rescore=False)
+    fold_models: list = []
     ap = groups.validation_ap(
         jobs, lambda tj: train_with_samples([], client=client, settings=inner, detection=det, jobs=tj),
-        candidates, settings, det, client=client, say=say)
+        candidates, settings, det, client=client, say=say, folds=fold_models)
     chosen = groups.choose_groups(ap, settings.group_classes.split(",") if settings.group_classes else None)
+    if folds is not None:
+        folds += [(held, groups.compose_chosen(ms, ("full",) + candidates, chosen)) for held, ms in fold_models]
     say("feature groups: " + (", ".join(f"{c} {v}" for c, v in chosen.items()) or "every class keeps all"))
     report = {"candidates": list(candidates), "classes": settings.group_classes or "all", "folds": groups.FOLDS,
               "margin": groups.MARGIN, "min_gt": groups.MIN_GT, "validation_ap": ap, "chosen": chosen}
@@ -655,6 +666,56 @@ def _train_boxfit(jobs: list[TrainJob], model: Model, det: DetectionSettings, se
     return fit
 
 
+def _rescore_task(job: TrainJob, model: Model, det: DetectionSettings) -> dict[str, np.ndarray]:
+    """The space's final detections (``model`` with its box regression) with their re-ranking features
+    (:func:`engine.rescore.rescore_features`) and whether each is a true element (VOC, IoU 0.5)."""
+    from engine.metrics.detection import match_detections
+
+    pts = load_space(job.store, job.ref, "gt_space", truth=True)
+    frame = CanonicalFrame.from_json(job.frame) if job.frame else space_frame(pts)
+    vol, index = prepare_indexed(pts, model, frame)
+    d = detect_in_volume(vol, model, det, index)
+    gt = _canonical_gt(job, vol, pts.gt_instance)
+    tp = np.zeros(len(d.score), dtype=bool)
+
+    def boxes(lo, hi):
+        return np.concatenate([(lo + hi) / 2.0, hi - lo, np.zeros((len(lo), 1))], axis=1)
+
+    for c in np.unique(d.class_code):
+        m, g = np.nonzero(d.class_code == c)[0], np.nonzero(gt["cls"] == c)[0]
+        if len(g):
+            tp[m] = match_detections(boxes(d.lo_m[m], d.hi_m[m]), d.score[m], np.arange(len(m)),
+                                     boxes(gt["lo"][g], gt["hi"][g]))
+    feats = rescore_features(d.score, d.lo_m, d.hi_m, index.points_in_metric, np.asarray(frame.extent, dtype=float))
+    return {"cls": d.class_code.astype(np.int64), "feats": feats, "tp": tp,
+            "n_gt": np.bincount(gt["cls"], minlength=N_CLASSES)[:N_CLASSES]}
+
+
+def _train_rescorer(jobs: list[TrainJob], model: Model, folds: list, det: DetectionSettings, client, say) -> Any:
+    """The re-ranking (:func:`engine.rescore.fit_rescorer`) from detections in the training spaces: out of
+    fold where the feature-group validation trained fold detectors (each building detected by the fold's
+    detectors that did not see it, with the final model's box regression: the errors a new building gets),
+    else the final detectors' own."""
+    models = [model] + [dataclasses.replace(m, boxfit=model.boxfit, rescorer=None) for _, m in folds]
+    which = [next((1 + i for i, (held, _) in enumerate(folds) if j.building in held), 0) for j in jobs]
+    res = run_tasks(_rescore_job, list(zip(jobs, which)), client=client, label="re-ranking samples",
+                    keys=[f"space {j.key}" for j in jobs], extra_args=(models, det))
+    names = sorted({j.building for j in jobs})
+    samples = {k: np.concatenate([r[k] for r in res]) for k in ("cls", "feats", "tp")}
+    samples["building"] = np.concatenate([np.full(len(r["cls"]), names.index(j.building)) for j, r in zip(jobs, res)])
+    fit = fit_rescorer(samples, np.sum([r["n_gt"] for r in res], axis=0))
+    fit.report["samples"] = "out of fold" if folds else "the final detectors' own"
+    on = [ELEMENT_CLASSES[c] for c in range(N_CLASSES) if fit.enabled[c]]
+    say(f"re-ranking: {len(samples['cls'])} detections ({int(samples['tp'].sum())} true, "
+        f"{fit.report['samples']}); used for {', '.join(on) or 'no class'}")
+    return fit
+
+
+def _rescore_job(item: tuple[TrainJob, int], models: list[Model], det: DetectionSettings) -> dict[str, np.ndarray]:
+    """:func:`_rescore_task` of one job with the detectors ``models[i]`` chosen for its building."""
+    return _rescore_task(item[0], models[item[1]], det)
+
+
 def _fit_class(s: Samples, mask: np.ndarray, settings: TrainSettings) -> SVMFit:
     """The SVM of one class on its samples (with each window's own part when ``settings.atom_weights``)."""
     atoms = (np.concatenate(s.pos_atom), np.concatenate(s.neg_atom)) if settings.atom_weights else None
@@ -701,8 +762,9 @@ def refit_without(model: Model, samples: dict[int, Samples], disabled: tuple[str
             atom_w[a], atom_b[a] = wa, fit.atom_bias[a]
     own = {"atom_weights": atom_w, "atom_bias": atom_b} if settings.atom_weights else \
         {"atom_weights": None, "atom_bias": None}
+    # the CRF and the re-ranking were learnt on the full model's scores: not this model's
     out = dataclasses.replace(model, layout=layout, weights=weights, bias=bias, trained=trained,
-                              crf=None, crf_arrays={}, **own)
+                              crf=None, crf_arrays={}, rescorer=None, **own)
     out.svm = dict(model.svm, ablation={"disabled": list(disabled),
                                         "samples": "the full model's (negatives mined with all features)"})
     return out

@@ -281,3 +281,41 @@ def test_a_models_box_regression_moves_its_classes_detections(buildings, trained
         else:
             np.testing.assert_allclose(b.world_size, a.world_size)
     assert walls >= 2
+
+
+def test_a_models_rescorer_replaces_its_classes_scores(buildings, trained):
+    """Detection gives the classes the model's learned re-ranking (engine.rescore) is enabled for its log-odds
+    as their score, from the features of their final boxes; other classes and ``rescore: false`` keep the
+    detector's score, and the boxes do not move."""
+    import dataclasses
+
+    from engine import rescore as rs
+    from engine.detection import detect_space
+    from engine.spacedata import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    wall = CLASS_CODES["wall"]
+    coef = np.zeros((12, rs.N_FEATURES))
+    coef[wall, 0] = -1.0  # walls: the detector's score turned around
+    coef[wall, rs.N_FEATURES - 3] = 0.5  # ... plus half the log of the space's height (the same for every wall)
+    enabled = np.zeros(12, bool)
+    enabled[wall] = True
+    rescored = dataclasses.replace(trained, rescorer=rs.Rescorer(np.zeros((12, rs.N_FEATURES)),
+                                                                 np.ones((12, rs.N_FEATURES)), coef, np.full(12, 2.0),
+                                                                 enabled))
+    plain = detect_space(pts, trained, DetectionSettings.from_config())
+    new = detect_space(pts, rescored, DetectionSettings.from_config())
+    off = detect_space(pts, rescored, DetectionSettings.from_config(rescore=False))
+    assert [p.class_code for p in plain] == [p.class_code for p in new] and len(plain) > 3
+    walls = [(a, b) for a, b in zip(plain, new) if a.class_code == wall]
+    assert len(walls) >= 2
+    shift = {round(b.score + a.score - 2.0, 9) for a, b in walls}
+    assert len(shift) == 1 and shift != {0.0}  # one space: the same height term for every wall
+    for a, b, c in zip(plain, new, off):
+        np.testing.assert_allclose(b.world_size, a.world_size)
+        assert c.score == a.score
+        if a.class_code != wall:
+            assert b.score == a.score

@@ -52,9 +52,26 @@ def test_apply_groups_refits_only_the_chosen_classes(two_buildings):
     assert out.layout == model.layout  # one layout: the dropped group is zero weights
 
 
+def test_fold_models_take_the_chosen_classes_rows_as_apply_groups_refits_them(two_buildings):
+    settings = TrainSettings.from_config(rounds=0, classes=(0, 1, 2))
+    model, samples = train_with_samples(two_buildings[:1], settings=settings)
+    ref = groups.apply_groups(model, samples, {"wall": "no_local"}, settings)
+    models = [model, refit_without(model, samples, ABLATIONS["no_color"], settings),
+              refit_without(model, samples, ABLATIONS["no_local"], settings)]
+    out = groups.compose_chosen(models, ("full", "no_color", "no_local"), {"wall": "no_local"})
+    np.testing.assert_allclose(out.weights, ref.weights)
+    np.testing.assert_allclose(out.atom_weights, ref.atom_weights)
+    np.testing.assert_allclose(out.bias, ref.bias)
+    assert out.layout == model.layout
+
+
 def test_training_validates_groups_on_building_folds(two_buildings):
-    settings = TrainSettings.from_config(rounds=0, classes=(0, 1, 2), select_groups="no_local,no_color")
+    settings = TrainSettings.from_config(rounds=0, classes=(0, 1, 2), select_groups="no_local,no_color", rescore=True)
     model, _ = train_with_samples(two_buildings, settings=settings)
+    # the re-ranking learnt from the fold detectors' detections of the buildings they did not see
+    rr = model.rescorer.report
+    assert rr["samples"] == "out of fold" and rr["classes"]["wall"]["detections"] > 0
+    assert 0 < rr["classes"]["wall"]["elements"]
     rep = model.svm["groups"]
     assert rep["candidates"] == ["no_local", "no_color"] and set(rep["validation_ap"]) == {"full", "no_local", "no_color"}
     # each building was a validation fold once: every ground-truth wall of both counted
@@ -67,3 +84,4 @@ def test_training_validates_groups_on_building_folds(two_buildings):
     # one building: nothing to validate on, the model keeps every group
     one, _ = train_with_samples(two_buildings[:1], settings=settings)
     assert one.svm["groups"]["chosen"] == {} and "skipped" in one.svm["groups"]
+    assert one.rescorer.report["samples"] == "the final detectors' own"
