@@ -55,16 +55,20 @@ def _mirrored(lo: np.ndarray, hi: np.ndarray, extent: np.ndarray) -> np.ndarray:
     return m
 
 
-def axis_features(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, axis: int, mirror: bool) -> np.ndarray:
+def axis_features(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, axis: int, mirror: bool,
+                  within: np.ndarray | None = None) -> np.ndarray:
     """Features ``(N_FEATURES,)`` of one box along one axis from ``points`` (canonical metres) around it.
 
     ``points`` may hold more than the slab (the box grown along every axis): only those
     within the box on the other two axes and within the grown slab on ``axis`` count.
+    ``within``: ``(points >= lo) & (points <= hi)`` per axis, if already computed.
     """
     other = [a for a in range(3) if a != axis]
     s = max(hi[axis] - lo[axis], 1e-6)
     x = points[:, axis]
-    ok = np.all((points[:, other] >= lo[other]) & (points[:, other] <= hi[other]), axis=1)
+    if within is None:
+        within = (points >= lo) & (points <= hi)
+    ok = within[:, other[0]] & within[:, other[1]]
     u = (x[ok] - lo[axis]) / s
     if mirror:
         u = 1.0 - u
@@ -94,9 +98,10 @@ def box_features(points_in, lo: np.ndarray, hi: np.ndarray, extent: np.ndarray) 
     for i in range(n):
         size = hi[i] - lo[i]
         pts = points_in(np.maximum(lo[i] - GROW * size, 0.0), np.minimum(hi[i] + GROW * size, extent))
+        within = (pts >= lo[i]) & (pts <= hi[i])  # once for the three axes
         for r in range(3):
             a = roles[i, r]
-            out[i, r] = axis_features(pts, lo[i], hi[i], a, bool(mirror[i, a]))
+            out[i, r] = axis_features(pts, lo[i], hi[i], a, bool(mirror[i, a]), within)
     return out, roles
 
 
