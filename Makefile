@@ -30,7 +30,7 @@ bench-quick: $(STAMP)
 	$(BIN)/python -m benchmarks --quick
 
 # the shipped model: detectors on generated buildings 1000-1019 (20 x 80 m2: twenty building styles of windows,
-# pilasters and beams; 2 mining rounds; about 20 min on 2 cores), then CRF weights on buildings 5000-5001
+# pilasters and beams; 2 mining rounds, then the box regression and the re-ranking; about 21 min on 2 cores), then CRF weights on buildings 5000-5001
 # (120 m2) the detectors never saw
 model: $(STAMP)
 	$(BIN)/buildingparser train --synthetic 20 --seed 1000 --area 80 --rounds 2 --model engine/models/default

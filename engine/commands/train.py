@@ -13,12 +13,15 @@ class, with hard-negative mining, from the ground-truth spaces of tile stores
 (S3DIS areas, generated buildings: anything with gt_space, gt_instance and the
 meta/ground_truth document).  The model is MODEL.npz + MODEL.json (no pickle).
 
-Then, with several buildings (two for the first, three for the second), two steps validated on the
-buildings themselves (both recorded in the model JSON): per-class feature groups (two folds of the
-buildings; a class drops a group when that ranks its held-out elements at least
+Then, with several buildings (two for the first, three for the others), three steps validated on
+the buildings themselves (all recorded in the model JSON): per-class feature groups (two folds of
+the buildings; a class drops a group when that ranks its held-out elements at least
 5 AP better: buildingparser.detection.train.select-groups, empty to skip, which
-halves the training time) and a learned box regression of each detection's faces
-(...train.box-fit: the classes it may be used for).
+halves the training time), a learned box regression of each detection's faces
+(...train.box-fit: the classes it may be used for), and a learned re-ranking of the
+final boxes from the points around them, taught by the fold detectors' detections of
+the buildings they did not see (...train.rescore; a class uses it when that ranks
+its detections at least 1 AP better).
 
 --synthetic [N] first generates N buildings (default: buildingparser.detection.
 train.synthetic-buildings) with seeds from --seed on, and trains on them too.

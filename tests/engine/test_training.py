@@ -63,6 +63,10 @@ def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained
     # the context block: configured, and in the shipped model's layout
     assert settings.context and shipped["context"] and load_model(None).layout.context and model.layout.context
     assert load_model(None).boxfit is not None and load_model(None).svm["groups"]["chosen"]
+    # the learned re-ranking: configured, and in the shipped model, learnt out of fold and used for some classes
+    rescorer = load_model(None).rescorer
+    assert settings.rescore and shipped["rescore"] and rescorer is not None and rescorer.enabled.any()
+    assert rescorer.report["samples"] == "out of fold"
     assert model.dictionary.relative_ratio == 0.5 and model.svm["settings"]["mining"] == "hardest"
     with dask.config.set({"buildingparser.detection.train.relative-ratio": None,
                           "buildingparser.detection.train.mining": "random"}):
