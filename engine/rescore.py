@@ -68,7 +68,7 @@ def rescore_features(score: np.ndarray, lo: np.ndarray, hi: np.ndarray, points_i
     """
     lo, hi = np.asarray(lo, dtype=np.float64).reshape(-1, 3), np.asarray(hi, dtype=np.float64).reshape(-1, 3)
     feats, _ = box_features(points_in, lo, hi, np.asarray(extent, dtype=np.float64))
-    return np.concatenate([np.asarray(score, dtype=np.float64).reshape(-1, 1), feats.reshape(len(lo), -1),
+    return np.concatenate([np.asarray(score, dtype=np.float64).reshape(-1, 1), feats.reshape(len(lo), 3 * BOX_FEATURES),
                            space_features(lo, hi, extent)], axis=1)
 
 

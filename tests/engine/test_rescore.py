@@ -41,6 +41,9 @@ def test_rescore_features_hold_the_score_and_see_where_points_stop():
     wide = 1 + 1 * rs.BOX_FEATURES
     share = wide + rs.BOX_FEATURES - 2
     assert f[0, share] < 0.5 < f[1, share]
+    # a space without detections (training must not stop at it)
+    none = rs.rescore_features(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), points_in, extent)
+    assert none.shape == (0, rs.N_FEATURES)
 
 
 def _samples(n_buildings: int, per: int, informative: bool, seed: int = 0) -> tuple[dict, np.ndarray]:
