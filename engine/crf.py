@@ -100,7 +100,8 @@ for _i, (_a, _b) in enumerate(CLASS_PAIRS):
 #: Key of ``Proposal.extra`` where the CRF leaves each proposal's contextual score (:func:`flip_margins`).
 MARGIN = "crf_margin"
 FORMAT = "buildingparser-crf"
-FORMAT_VERSION = 1
+#: 2: the per-class ``decides`` mask (``crf_decides``); version-1 weights load with every class decided.
+FORMAT_VERSION = 2
 #: Names of the blocks of one edge feature vector, in order (see the module docstring).
 EDGE_FEATURE_BLOCKS = ("B_u", "B_v", "S_u", "S_v", "abs_dP", "const", "iou")
 
@@ -134,6 +135,12 @@ class CRFWeights:
         ``K``, the side of the occupancy pattern the edge features were built for.
     k
         ``(12,)`` neighbours per class ``k_e`` of the graph these weights were trained on.
+    decides
+        ``(12,)`` bool: the classes whose keep/drop the CRF decides.  A class it does not decide
+        keeps the detector's own decision (score > 0) and takes part only as context: its labels
+        are fixed in the integer program (:func:`fix_labels`).  Training leaves out the classes
+        whose out-of-fold kept set ranks below the detector's own set (:func:`engine.ssvm.train_crf`).
+        None: every class.
     """
 
     w0: float
@@ -141,6 +148,7 @@ class CRFWeights:
     edge: np.ndarray
     grid: int
     k: np.ndarray
+    decides: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.w0 = float(self.w0)
@@ -148,6 +156,10 @@ class CRFWeights:
         self.bias = np.asarray(self.bias, dtype=np.float64).reshape(-1)
         self.edge = np.asarray(self.edge, dtype=np.float64)
         self.k = np.asarray(self.k, dtype=np.int64).reshape(-1)
+        self.decides = (np.ones(N_CLASSES, dtype=bool) if self.decides is None
+                        else np.asarray(self.decides, dtype=bool).reshape(-1))
+        if self.decides.shape != (N_CLASSES,):
+            raise ValueError(f"decides needs {N_CLASSES} values, got {self.decides.shape}")
         if self.grid < 1:
             raise ValueError(f"grid must be >= 1, not {self.grid}")
         if self.bias.shape != (N_CLASSES,) or self.k.shape != (N_CLASSES,):
@@ -187,18 +199,20 @@ class CRFWeights:
         if vec.shape != (self.size,):
             raise ValueError(f"weight vector of shape {vec.shape}, expected ({self.size},)")
         return CRFWeights(vec[0], vec[1:1 + N_CLASSES], vec[1 + N_CLASSES:].reshape(self.edge.shape),
-                          self.grid, self.k.copy())
+                          self.grid, self.k.copy(), self.decides.copy())
 
     # -- storage: arrays + JSON, never pickle ------------------------------------------------
     def to_arrays(self, prefix: str = "crf_") -> dict[str, np.ndarray]:
         """The arrays to store in a model ``.npz`` (names prefixed ``crf_``)."""
-        return {f"{prefix}bias": self.bias.copy(), f"{prefix}edge": self.edge.copy(), f"{prefix}k": self.k.copy()}
+        return {f"{prefix}bias": self.bias.copy(), f"{prefix}edge": self.edge.copy(), f"{prefix}k": self.k.copy(),
+                f"{prefix}decides": self.decides.copy()}
 
     def params(self) -> dict[str, Any]:
         """The JSON parameters stored next to :meth:`to_arrays`."""
         return {"format": FORMAT, "version": FORMAT_VERSION, "w0": self.w0, "grid": self.grid,
                 "classes": list(ELEMENT_CLASSES), "edge_features": list(EDGE_FEATURE_BLOCKS),
-                "edge_index": "unordered class pair (a <= b), row-major over a then b"}
+                "edge_index": "unordered class pair (a <= b), row-major over a then b",
+                "decides": [c for c, d in zip(ELEMENT_CLASSES, self.decides) if d]}
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], params: dict[str, Any], prefix: str = "crf_") -> "CRFWeights":
@@ -211,7 +225,7 @@ class CRFWeights:
             raise ValueError("CRF weights were trained for other classes")
         try:
             return cls(params["w0"], arrays[f"{prefix}bias"], arrays[f"{prefix}edge"], params["grid"],
-                       arrays[f"{prefix}k"])
+                       arrays[f"{prefix}k"], arrays.get(f"{prefix}decides"))
         except KeyError as exc:
             raise ValueError(f"CRF weights lack {exc}") from None
 
@@ -576,6 +590,52 @@ def solve_ip(unary: np.ndarray, edges: np.ndarray, pairwise: np.ndarray,
     return y, info
 
 
+def fixed_labels(graph: CRFGraph, weights: CRFWeights) -> np.ndarray | None:
+    """Per node: 1/0 for the nodes of classes the CRF does not decide (the detector's score > 0), -1 for
+    the free ones; None when the CRF decides every node."""
+    fixed = ~weights.decides[graph.classes]
+    if not fixed.any():
+        return None
+    return np.where(fixed, (graph.scores > 0).astype(np.int64), -1)
+
+
+def fix_labels(unary: np.ndarray, edges: np.ndarray, pairwise: np.ndarray,
+               labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The integer program of the free nodes (``labels == -1``) with the others' labels (0/1) put in.
+
+    An edge to a kept fixed node adds its energy to the free end's unary term; edges to dropped fixed
+    nodes, and between fixed nodes, are constants and leave.  Node indices are kept; a fixed node's
+    unary becomes 0 (it has no edge left: the caller sets its label).
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    fixed = labels >= 0
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    fu, fv = fixed[edges[:, 0]], fixed[edges[:, 1]]
+    out = np.where(fixed, 0.0, unary)
+    one = fu != fv
+    free_end = np.where(fu, edges[:, 1], edges[:, 0])[one]
+    fixed_end = np.where(fu, edges[:, 0], edges[:, 1])[one]
+    np.add.at(out, free_end, pairwise[one] * (labels[fixed_end] == 1))
+    both_free = ~fu & ~fv
+    return out, edges[both_free], np.asarray(pairwise)[both_free]
+
+
+def solve_fixed(unary: np.ndarray, edges: np.ndarray, pairwise: np.ndarray, labels: np.ndarray | None,
+                settings: CRFSettings | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """:func:`solve_ip` with some labels fixed (``labels``: 0/1 fixed, -1 free; None: all free).
+
+    The free nodes get the labels that maximise equation (1) given the fixed ones; ``objective`` is
+    the energy of the whole labelling.
+    """
+    if labels is None:
+        return solve_ip(unary, edges, pairwise, settings)
+    u2, e2, p2 = fix_labels(unary, edges, pairwise, labels)
+    y, info = solve_ip(u2, e2, p2, settings)
+    y = np.where(labels >= 0, labels == 1, y)
+    info["objective"] = energy(unary, edges, pairwise, y)
+    return y, info
+
+
 # -----------------------------------------------------------------------------------------
 # Public API: one space, all spaces
 # -----------------------------------------------------------------------------------------
@@ -655,7 +715,7 @@ def _select(proposals: list[Proposal], weights: CRFWeights,
             "kept": 0, "objective": 0.0, "warning": None}
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
-    y, sinfo = solve_ip(unary, graph.edges, pairwise, settings)
+    y, sinfo = solve_fixed(unary, graph.edges, pairwise, fixed_labels(graph, weights), settings)
     warning = f"space {sid}: {sinfo['warning']}" if sinfo["warning"] else None
     info = {"space_id": sid, "status": sinfo["status"], "seconds": time.perf_counter() - t0,
             "solver_seconds": sinfo["seconds"], "nodes": graph.n, "edges": graph.m, "kept": int(y.sum()),

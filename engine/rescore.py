@@ -134,10 +134,10 @@ def _fit(x: np.ndarray, y: np.ndarray, c: float) -> tuple[np.ndarray, np.ndarray
     return mu, sd, lr.coef_[0], float(lr.intercept_[0])
 
 
-def _fold_of(building: np.ndarray) -> np.ndarray:
-    """Validation fold of each sample: buildings dealt round-robin (in id order) into ``FOLDS`` folds."""
+def building_folds(building: np.ndarray, folds: int = FOLDS) -> np.ndarray:
+    """Validation fold of each sample: buildings dealt round-robin (in id order) into ``folds`` folds."""
     ids = np.unique(building)
-    fold = {int(b): i % FOLDS for i, b in enumerate(ids)}
+    fold = {int(b): i % folds for i, b in enumerate(ids)}
     return np.array([fold[int(b)] for b in building], dtype=np.int64)
 
 
@@ -170,7 +170,7 @@ def fit_rescorer(samples: dict[str, np.ndarray], n_gt: np.ndarray, classes: list
             rec["why"] = "too few true or false detections, or buildings"
             continue
         x = np.asarray(samples["feats"], dtype=np.float64)[sel]
-        folds = _fold_of(blds)
+        folds = building_folds(blds)
         base = average_precision(x[:, 0], y, int(n_gt[c]))
         rec["ap_detector"] = float(base)
         best = None

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from engine import config
-from engine.crf import CRFSettings, CRFWeights, build_graph, energies, joint_feature, solve_ip
+from engine.crf import CRFSettings, CRFWeights, build_graph, energies, fixed_labels, joint_feature, solve_fixed
 from engine.metrics.detection import boxes_array, match_detections
 from engine.proposals import Proposal
 from tiles.tasks import run_tasks
@@ -98,8 +98,11 @@ def _oracle(example: tuple[list[Proposal], np.ndarray], weights: CRFWeights,
     proposals, ystar = example
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
+    fixed = fixed_labels(graph, weights)
+    if fixed is not None:  # labels the CRF does not decide are its target as they are
+        ystar = np.where(fixed >= 0, fixed == 1, ystar)
     # the loss is linear in y: miss_cost * y* (1 - y) + (1 - y*) y = const + (1 - y* - miss_cost y*) y
-    yhat, info = solve_ip(unary + np.where(ystar, -miss_cost, 1.0), graph.edges, pairwise, settings)
+    yhat, info = solve_fixed(unary + np.where(ystar, -miss_cost, 1.0), graph.edges, pairwise, fixed, settings)
     psi = joint_feature(graph, ystar) - joint_feature(graph, yhat)
     loss = hamming_loss(ystar, yhat, miss_cost)
     return {"psi": psi, "loss": loss, "hinge": loss - float(weights.vector() @ psi), "status": info["status"]}
@@ -110,7 +113,7 @@ def _predict(example: tuple[list[Proposal], np.ndarray], weights: CRFWeights, se
     proposals, ystar = example
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
-    y, info = solve_ip(unary, graph.edges, pairwise, settings)
+    y, info = solve_fixed(unary, graph.edges, pairwise, fixed_labels(graph, weights), settings)
     return {"errors": int(np.sum(y != ystar)), "nodes": len(y), "status": info["status"]}
 
 
@@ -312,8 +315,9 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
               ground_truth_per_space: Sequence[Sequence[dict[str, Any]]], *, grid: int | None = None,
               k: int | dict[str, int] | None = None, lam: float | None = None, iterations: int | None = None,
               tol: float | None = None, miss_cost: float | None = None, iou_threshold: float | None = None,
+              buildings: Sequence[Any] | None = None, miss_costs: Sequence[float] | None = None,
               client=None, settings: CRFSettings | None = None,
-              report: dict[str, Any] | None = None) -> CRFWeights:
+              report: dict[str, Any] | None = None, say=None) -> CRFWeights:
     """Learn :class:`engine.crf.CRFWeights` from detected proposals and ground-truth boxes, space by space.
 
     Parameters
@@ -326,30 +330,60 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
         ``K`` of the occupancy patterns; None takes it from the proposals.
     k
         ``k_e`` (one number or ``{class: k}``); None reads ``buildingparser.crf.k`` / ``k-per-class``.
-    lam, iterations, tol, miss_cost, client, settings
+    lam, iterations, tol, client, settings
         See :func:`fit_ssvm`.
+    miss_cost
+        One miss cost (see :func:`fit_ssvm`); None: the candidates ``miss_costs``.
     iou_threshold
         Matching threshold of the labels; None reads ``buildingparser.crf.ssvm.iou``.
+    buildings
+        The building of each space.  Given (and at least two buildings), the miss cost among the
+        candidates and the classes the CRF decides are chosen by building-wise folds
+        (:func:`engine.crf_validation.choose`); None: the first candidate, every class decided.
+        The weights are learnt with every class free either way (as in the folds); the returned
+        :attr:`~engine.crf.CRFWeights.decides` says where they decide when used.
+    miss_costs
+        Candidates when ``miss_cost`` is None; None reads ``buildingparser.crf.train.miss-costs``.
     report
         If given, filled with ``history``, ``errors``, ``objective``, ``converged``, ``statuses`` (see
-        :class:`SSVMResult`), ``spaces`` and ``positives`` / ``proposals`` (label counts).
+        :class:`SSVMResult`), ``spaces`` and ``positives`` / ``proposals`` (label counts), ``miss_cost``
+        and ``validation`` (the choice's report, or None).
+    say
+        Optional ``say(message)`` for progress.
     """
+    from engine.crf_validation import choose
+
     if len(proposals_per_space) != len(ground_truth_per_space):
         raise ValueError("one ground-truth list per space of proposals expected")
+    if buildings is not None and len(buildings) != len(proposals_per_space):
+        raise ValueError("one building label per space expected")
     iou = float(config.get("crf.ssvm.iou", 0.5) if iou_threshold is None else iou_threshold)
     if grid is None:
         first = next((p for props in proposals_per_space for p in props), None)
         if first is None:
             raise ValueError("no proposals to train on")
         grid = int(np.asarray(first.occupancy).shape[0])
+    costs = [float(miss_cost)] if miss_cost is not None else [float(c) for c in (
+        miss_costs if miss_costs is not None else config.get("crf.train.miss-costs", None)
+        or [config.get("crf.ssvm.miss-cost", 1.0)])]
     jobs = [(list(p), list(g)) for p, g in zip(proposals_per_space, ground_truth_per_space)]
     labels = run_tasks(_label_task, jobs, client=client, label="S-SVM labels", extra_args=(iou,))
     init = CRFWeights.new(grid, k=k)
-    res = fit_ssvm([(p, y) for (p, _), y in zip(jobs, labels)], init, lam=lam, iterations=iterations, tol=tol,
-                   miss_cost=miss_cost, client=client, settings=settings)
+    fit_kw = dict(lam=lam, iterations=iterations, tol=tol, client=client, settings=settings)
+    validation = None
+    cost = costs[0]
+    if buildings is not None:
+        cost, decides, validation = choose(
+            [p for p, _ in jobs], [g for _, g in jobs], labels, list(buildings), costs, init,
+            lambda ex, w, c: fit_ssvm(ex, w, miss_cost=c, **fit_kw).weights, client=client, settings=settings,
+            iou=iou, say=say)
+    # every class free, as in the folds that chose the gate; the gate applies when the weights are used
+    res = fit_ssvm([(p, y) for (p, _), y in zip(jobs, labels)], init, miss_cost=cost, **fit_kw)
+    if validation is not None:
+        res.weights.decides = decides
     if report is not None:
         report.update(history=res.history, errors=res.errors, objective=res.objective, converged=res.converged,
                       statuses=res.statuses,
                       spaces=sum(1 for p, _ in jobs if p), positives=int(sum(int(y.sum()) for y in labels)),
-                      proposals=int(sum(len(y) for y in labels)))
+                      proposals=int(sum(len(y) for y in labels)), miss_cost=cost, validation=validation)
     return res.weights

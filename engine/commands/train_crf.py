@@ -28,6 +28,13 @@ mistakes (duplicates, false walls, missed furniture).  train-crf refuses DATA
 stores and generated seeds that MODEL's provenance says its detectors were
 trained on; check other overlaps yourself.
 
+With two or more buildings, the miss cost of the structured SVM (among
+buildingparser.crf.train.miss-costs) and the classes the CRF decides are chosen
+by building-wise folds (engine/crf_validation.py): a class is decided by the
+CRF only where its out-of-fold kept set beats the detector's own set (score >
+0) by 1 AP point; the other classes keep the detector's decision and take part
+as context.  MODEL.json's crf.training.validation records the choice.
+
 DATA are tile stores with ground truth (gt_space, gt_instance and
 meta/ground_truth).  --synthetic [N] also generates N buildings (default:
 buildingparser.crf.train.synthetic-buildings) with seeds S, S+1, ... (--seed,
@@ -163,12 +170,14 @@ def run(args: argparse.Namespace) -> int:
                 names.append(f"synthetic seed {s}")
         props_per_space: list[list[Any]] = []
         gt_per_space: list[list[dict[str, Any]]] = []
+        building_of: list[str] = []
         for i, (name, st) in enumerate(zip(names, stores)):
             t0 = time.perf_counter()
             props = detect(st, model=model, client=client, space_array="gt_space")
             p, g = group_by_space(props, (st.doc(DOC) or {}).get("elements", []))
             props_per_space += p
             gt_per_space += g
+            building_of += [f"{i}: {name}"] * len(p)
             log(f"detected {len(props)} proposals in {len(p)} spaces of {name} "
                 f"({i + 1}/{len(stores)}, {time.perf_counter() - t0:.1f} s)")
         if not any(props_per_space):
@@ -177,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         report: dict[str, Any] = {}
         weights = train_crf(props_per_space, gt_per_space, client=client, report=report,
-                            iterations=args.iterations)
+                            iterations=args.iterations, buildings=building_of, say=log)
         fit_seconds = time.perf_counter() - t0
     training = {
         "data": names, "synthetic": {"buildings": n_synth, "first_seed": seed, "area_m2": area,
@@ -185,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
         "spaces": report["spaces"], "proposals": report["proposals"], "positives": report["positives"],
         "iterations": len(report["history"]), "converged": bool(report["converged"]),
         "errors": report["errors"], "objective": report["objective"], "statuses": report["statuses"],
+        "miss_cost": report["miss_cost"], "validation": report["validation"],
     }  # no durations: training again on the same buildings writes the same model
     weights.store_in(model, training=training)
     npz, js = save_in_place(model, args.model)
@@ -193,7 +203,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"CRF weights written to {npz} + {js}: {report['spaces']} spaces, {report['proposals']} proposals "
           f"({report['positives']} true), {len(report['history'])} S-SVM iterations"
           f"{' (converged)' if report['converged'] else ' (not converged)'}, training error "
-          f"{err['initial']:.3f} -> {err['final']:.3f}, {time.perf_counter() - t_start:.0f} s "
+          f"{err['initial']:.3f} -> {err['final']:.3f}, miss cost {report['miss_cost']:g}, deciding "
+          f"{', '.join(weights.params()['decides']) or 'no class'} (the others keep the detector's decision), "
+          f"{time.perf_counter() - t_start:.0f} s "
           f"(structured SVM {fit_seconds:.0f} s)")
     return 0
 

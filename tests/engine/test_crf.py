@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from engine.crf import (CLASS_PAIRS, CRFSettings, CRFWeights, apply_crf, build_graph, edge_feature_size,
-                        edge_scale, energies, energy, flip_margins, joint_feature, metrics_block, pair_index,
-                        rescored, select_elements, solve_ip)
+                        edge_scale, energies, energy, fix_labels, flip_margins, joint_feature, metrics_block,
+                        pair_index, rescored, select_elements, solve_fixed, solve_ip)
 from engine.crf_scenes import make_scenes
 from engine.proposals import Proposal
 from tiles.classes import CLASS_CODES
@@ -81,6 +81,49 @@ def test_select_elements_optimum_equals_brute_force(seed):
         tolerance(unary, pairwise, CRFSettings())
     # the energy is linear in the weights through the joint feature map (what the S-SVM relies on)
     assert w.vector() @ joint_feature(graph, y) == pytest.approx(energy(unary, graph.edges, pairwise, y))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_fixed_labels_leave_the_best_labelling_of_the_free_nodes(seed):
+    rng = np.random.default_rng(50 + seed)
+    n = int(rng.integers(4, 10))
+    edges = np.array([(a, b) for a in range(n) for b in range(a + 1, n) if rng.random() < 0.6]).reshape(-1, 2)
+    unary, pairwise = rng.normal(0, 1, n), rng.normal(0, 2, len(edges))
+    labels = np.where(rng.random(n) < 0.4, (rng.random(n) < 0.5).astype(int), -1)
+    labels[0], labels[1] = 1, -1  # at least one fixed (kept) and one free node
+    y, info = solve_fixed(unary, edges, pairwise, labels, CRFSettings())
+    assert np.array_equal(y[labels >= 0], labels[labels >= 0] == 1)  # the fixed ones as given
+    free = np.flatnonzero(labels < 0)
+    best = -np.inf
+    for bits in itertools.product([0, 1], repeat=len(free)):
+        cand = labels == 1
+        cand[free] = np.array(bits, bool)
+        best = max(best, energy(unary, edges, pairwise, cand))
+    assert abs(energy(unary, edges, pairwise, y) - best) <= tolerance(unary, pairwise, CRFSettings())
+    assert info["objective"] == pytest.approx(energy(unary, edges, pairwise, y))
+    # the reduced problem: only edges between free nodes; a kept fixed neighbour's energy moves into the unary
+    u2, e2, p2 = fix_labels(unary, edges, pairwise, labels)
+    assert np.all(labels[e2] < 0) and len(e2) == len(p2)
+    assert np.all(u2[labels >= 0] == 0)
+    for v in free:
+        to_kept = [(a, b) for (a, b) in edges if v in (a, b) and labels[b if a == v else a] == 1]
+        extra = sum(pairwise[i] for i, e in enumerate(edges) if tuple(e) in to_kept)
+        assert u2[v] == pytest.approx(unary[v] + extra)
+    assert solve_fixed(unary, edges, pairwise, None)[0].tolist() == solve_ip(unary, edges, pairwise)[0].tolist()
+
+
+def test_classes_the_crf_does_not_decide_keep_the_detectors_decision():
+    # a wall the CRF would drop (bias -10) and a negative-scored chair it would keep (bias +10)
+    props = [prop(WALL, [0.1, 0.1, 0], [0.05, 0.8, 1], 0.7), prop(CHAIR, [0.5, 0.5, 0], [0.1, 0.1, 0.3], -0.4),
+             prop(TABLE, [0.5, 0.4, 0], [0.2, 0.2, 0.3], 0.2)]
+    w = CRFWeights.new(K, k=2)
+    w.bias[WALL], w.bias[CHAIR], w.bias[TABLE] = -10.0, 10.0, 0.0
+    w.block(CHAIR, TABLE, "const")[:] = -50.0  # keeping the chair would cost the table
+    kept, _ = select_elements(props, w)
+    assert [p.class_code for p in kept] == [CHAIR]
+    w.decides[WALL] = w.decides[CHAIR] = False
+    kept, _ = select_elements(props, w)
+    assert [p.class_code for p in kept] == [WALL, TABLE]  # the detector's labels; the table freed of the chair
 
 
 def test_isolated_nodes_follow_their_unary_sign():
@@ -210,7 +253,15 @@ def test_weights_round_trip_through_files_and_the_model_slot(tmp_path):
     assert npz.endswith("crf.npz") and js.endswith("crf.json")
     back = CRFWeights.load(tmp_path / "crf")
     np.testing.assert_array_equal(back.vector(), w.vector())
-    assert back.grid == 3 and back.k[WALL] == 5
+    assert back.grid == 3 and back.k[WALL] == 5 and back.decides.all()
+    w.decides[CHAIR] = False
+    w.save(tmp_path / "crf2")
+    back = CRFWeights.load(tmp_path / "crf2")
+    assert back.decides.tolist() == w.decides.tolist() and "chair" not in back.params()["decides"]
+    # weights of version 1 (no crf_decides) load with every class decided
+    arrays = {k: v for k, v in w.to_arrays().items() if k != "crf_decides"}
+    old = CRFWeights.from_arrays(arrays, dict(w.params(), version=1))
+    assert old.decides.all()
 
     class Slot:
         crf = None

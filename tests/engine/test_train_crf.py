@@ -49,7 +49,7 @@ def test_train_crf_writes_weights_into_the_model(small_model, client, capsys):
     assert not np.allclose(w.vector(), CRFWeights.new(w.grid).vector())
     # the detectors are untouched
     old_arrays, new_arrays = before.arrays(), after.arrays()
-    assert set(new_arrays) == set(old_arrays) | {"crf_bias", "crf_edge", "crf_k"}
+    assert set(new_arrays) == set(old_arrays) | {"crf_bias", "crf_edge", "crf_k", "crf_decides"}
     for name, a in old_arrays.items():
         np.testing.assert_array_equal(new_arrays[name], a)
     assert after.provenance == before.provenance and after.layout == before.layout
@@ -58,6 +58,9 @@ def test_train_crf_writes_weights_into_the_model(small_model, client, capsys):
     assert t["data"] == ["synthetic seed 13"] and t["synthetic"]["first_seed"] == 13
     assert (t["spaces"], t["proposals"], t["positives"], t["iterations"]) == (spaces, props, true, iters)
     assert 0 < true < props and spaces >= 2 and 1 <= iters <= 15
+    # one building: no folds to choose on, so the first miss cost and every class decided
+    assert t["validation"] == {"rule": t["validation"]["rule"], "buildings": 1, "folds": 0}
+    assert t["miss_cost"] == 2.0 and w.decides.all() and "deciding ceiling, floor, wall" in out
     assert float(m.group(5)) == pytest.approx(t["errors"]["initial"], abs=1e-3)
     assert float(m.group(6)) == pytest.approx(t["errors"]["final"], abs=1e-3)
     json.loads((root / "model.json").read_text())  # still plain JSON, no temporary files left
