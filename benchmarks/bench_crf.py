@@ -231,18 +231,21 @@ def buildings_part(workdir: str, seeds: dict[str, list[int]] | None = None,
         model = train(stores["detector"], client=client)
         out["detector_seconds"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        train_props, train_gts = [], []
-        for st in stores["crf"]:
+        train_props, train_gts, train_blds = [], [], []
+        for b, st in enumerate(stores["crf"]):
             props = detect(st, model=model, client=client, space_array="gt_space")
             p, g = group_by_space(props, (st.doc("ground_truth") or {}).get("elements", []))
             train_props += p
             train_gts += g
+            train_blds += [b] * len(p)
         report: dict[str, Any] = {}
-        weights = train_crf(train_props, train_gts, client=client, report=report)
+        # as train-crf does: the miss cost and the classes the CRF decides by building-wise folds
+        weights = train_crf(train_props, train_gts, client=client, report=report, buildings=train_blds)
         out["crf_train_seconds"] = time.perf_counter() - t0
         out["crf_train"] = {"spaces": report["spaces"], "positives": report["positives"],
                             "proposals": report["proposals"], "errors": report["errors"],
-                            "iterations": len(report["history"]), "converged": report["converged"]}
+                            "iterations": len(report["history"]), "converged": report["converged"],
+                            "miss_cost": report["miss_cost"], "decides": weights.params()["decides"]}
         # detection with and without the CRF on ground-truth spaces of the test buildings
         groups, gt_groups = [], []
         for i, st in enumerate(stores["test"]):
