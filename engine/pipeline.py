@@ -167,7 +167,11 @@ def _compute(input: str, out: str, client, opt: RunOptions, timings: dict[str, f
             _save_proposals(store, ELEMENTS_DOC, elements, crf=_without(crf_report, "per_space"))
         timings["crf"] = t.seconds
         log.write(StageRecord("crf", fp_crf, "ok", t.seconds, outputs={"elements": len(elements)}))
-        say(f"crf: kept {len(elements)} of {len(proposals)} proposals ({t.seconds:.1f} s)")
+        decided = crf_report.get("decides")
+        who = ("" if decided is None or len(decided) == 12 else
+               f"; the CRF decides {', '.join(decided) if decided else 'no class'}, the others keep the "
+               "detector's decision (score > 0)")
+        say(f"crf: kept {len(elements)} of {len(proposals)} proposals{who} ({t.seconds:.1f} s)")
 
     # -- space update (paper 4.2) ---------------------------------------------------------------
     fp_update = fingerprint("space_update", _plain(vars(UpdateParams.from_config())) if opt.update else None, fp_crf)

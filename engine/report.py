@@ -25,7 +25,7 @@ performance report.
                    "iou": {class: float}, "miou": float} | null,          # null without ground truth
      "crf": {"spaces": int, "solve_seconds": {"median": float, "max": float},
              "status": {status_name: count},
-             "proposals": int, "kept": int},                             # the last two optional
+             "proposals": int, "kept": int, "decides": [class, ...]},    # the last three optional
      "timings": {stage: seconds}, "elements": {class: count}}
 
 Fractions (AP, IoU, ARI) are stored in [0, 1] and shown as percentages with
@@ -36,7 +36,8 @@ ground truth) show as "n/a".  ``crf.status`` names are CP-SAT's (``OPTIMAL``,
 see :mod:`engine.crf`; any other status (``FEASIBLE``: best solution found
 within the limits; ``UNKNOWN``...: the unary-only fallback) is called out under
 the status table.  ``crf.proposals`` / ``crf.kept`` (optional) count the
-proposals before and after the CRF.
+proposals before and after the CRF; ``crf.decides`` (optional) names the classes
+whose keep/drop the CRF decided (the others kept the detector's decision).
 """
 from __future__ import annotations
 
@@ -181,6 +182,10 @@ def _crf_section(m: dict[str, Any]) -> str:
         rows.append(["proposals", fmt_int(c.get("proposals"))])
     if "kept" in c:
         rows.append(["kept", fmt_int(c.get("kept"))])
+    if "decides" in c:
+        d = list(c.get("decides") or [])
+        rows.append(["classes the CRF decides", ", ".join(d) if d else "none (every class keeps the detector's "
+                     "decision, score > 0: the CRF beat it on no class of its training buildings)"])
     rows += [["solve seconds per space, median", fmt_float(ss.get("median"), 3)],
              ["solve seconds per space, max", fmt_float(ss.get("max"), 3)]]
     status = c.get("status") or {}
