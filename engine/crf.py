@@ -43,6 +43,10 @@ Choices made here, beyond the paper's text:
   edge, are kept exactly when their unary term is positive (that is their
   optimal label: they touch no edge).  A space's IP thus has at most
   ``12 * N`` node and ``12 * N * sum_e k_e`` edge variables.
+* **Classes the CRF decides** (:attr:`CRFWeights.decides`, chosen by
+  :mod:`engine.crf_validation` on the CRF's training buildings, out of fold): the
+  nodes of the other classes keep the detector's decision (score > 0) and enter the
+  program with fixed labels (:func:`fix_labels`), as context for the others.
 * **Integer objective.** CP-SAT needs integer coefficients: every unary and
   pairwise energy is multiplied by ``resolution / max|energy|`` (``resolution``
   = 10^6 by default) and rounded.  The solution is optimal for the rounded
