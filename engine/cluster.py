@@ -75,7 +75,7 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
         )
         client = Client(cluster)
     try:
-        prepare_workers(client)
+        pin_library_threads(client)
         if not quiet:
             link = client.dashboard_link if _has_dashboard(client) else "(no dashboard)"
             where = address or f"local cluster, {len(client.scheduler_info()['workers'])} workers"
@@ -122,36 +122,11 @@ class LibraryThreads(WorkerPlugin):
         numcodecs.blosc.set_nthreads(n)
 
 
-class MainThreadImports(WorkerPlugin):
-    """Imports pandas in each worker's main thread (``setup`` runs on the worker's event loop), before tasks.
-
-    OR-Tools imports pandas, and the CRF's tasks import OR-Tools from a task thread.  pandas's C
-    extensions look each other up through the half-imported ``pandas`` module, and a first import
-    from a non-main thread can fail with "partially initialized module 'pandas' has no attribute
-    '_pandas_datetime_CAPI'" (seen once here, on both workers of a heavily loaded machine, which then
-    failed every CRF task: a failed import leaves broken modules behind).  Imported once here, the
-    tasks find it whole.
-    """
-
-    name = "buildingparser-main-thread-imports"
-
-    def setup(self, worker) -> None:
-        import pandas  # noqa: F401
-
-
 def library_threads() -> int | None:
     """``buildingparser.library-threads``: threads of the libraries' own pools per worker (None: the worker's
     thread count; 0: leave the libraries' defaults)."""
     v = config.get("library-threads")
     return None if v is None else int(v)
-
-
-def prepare_workers(client: Client | None) -> None:
-    """What every worker needs before our tasks: :class:`MainThreadImports`, then :func:`pin_library_threads`."""
-    if client is None:
-        return
-    client.register_plugin(MainThreadImports(), name=MainThreadImports.name)
-    pin_library_threads(client)
 
 
 def pin_library_threads(client: Client | None) -> None:

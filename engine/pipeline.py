@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.cluster import prepare_workers
+from engine.cluster import pin_library_threads
 from engine.stages import StageLog, StageRecord, Timer, failures_recorded, fingerprint
 from tiles import paths
 from tiles.errors import UserError
@@ -86,7 +86,7 @@ def run(input: str, out: str, *, client=None, options: RunOptions | None = None)
     opt = options or RunOptions()
     out = paths.normalize(out)
     _check_out(out, opt)
-    prepare_workers(client)  # pandas imported in each worker's main thread; library pools pinned to its threads
+    pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
     _withdraw_report(out, opt)
     timings: dict[str, float] = {}
     staging = tempfile.mkdtemp(prefix="buildingparser-run-")

@@ -165,29 +165,15 @@ def test_library_pools_pinned_to_the_worker_threads(threads, monkeypatch):
         assert next(iter(c.run(_pools).values())) == after
 
 
-def _has_pandas() -> bool:
-    import sys
-
-    return "pandas" in sys.modules
-
-
-def test_embedded_cluster_and_run_prepare_the_workers(tmp_path, monkeypatch):
-    """cluster_client pins the pools of its workers and imports pandas in their main thread (a bare
-    worker has not: the CRF's tasks would import it first, from a task thread); so does pipeline.run
-    on a client it is given."""
-    from distributed import Client, LocalCluster
-
+def test_embedded_cluster_and_run_pin_library_pools(tmp_path, monkeypatch):
+    """cluster_client pins the pools of its workers; so does pipeline.run on a client it is given."""
     from engine import pipeline
 
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.ERROR) as lc, Client(lc) as c:
-        assert c.run(_has_pandas) == {w: False for w in c.scheduler_info()["workers"]}
     with dask.config.set({"scheduler-address": None, "buildingparser.scheduler": None}), \
             cluster.cluster_client(n_workers=1, memory_limit="1GiB", quiet=True) as c:
         assert next(iter(c.run(_pools).values()))["rayon"] == "1"
-        assert list(c.run(_has_pandas).values()) == [True]
     seen = []
-    monkeypatch.setattr(pipeline, "prepare_workers", seen.append)
+    monkeypatch.setattr(pipeline, "pin_library_threads", seen.append)
     monkeypatch.setattr(pipeline, "_withdraw_report", lambda out, opt: (_ for _ in ()).throw(RuntimeError("stop")))
     with pytest.raises(RuntimeError, match="stop"):
         pipeline.run(str(tmp_path / "in.laz"), str(tmp_path / "out"), client="a client")
