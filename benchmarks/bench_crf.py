@@ -17,7 +17,8 @@ Two parts:
 * **buildings** (full runs only): generated buildings (:func:`engine.synth.generate`),
   split three ways: the detector is trained on some, the CRF on the detector's
   proposals in others (so it sees the detector's real errors, not its training
-  fit), and the rest are held apart for testing: the same comparison (on
+  fit; its miss cost and the classes it decides chosen by building-wise folds, as
+  ``train-crf`` does), and the rest are held apart for testing: the same comparison (on
   ground-truth spaces), and ARI of the parsed spaces before and after the
   space update from the detected walls (after the CRF).
 
