@@ -142,8 +142,8 @@ class CRFWeights:
     decides
         ``(12,)`` bool: the classes whose keep/drop the CRF decides.  A class it does not decide
         keeps the detector's own decision (score > 0) and takes part only as context: its labels
-        are fixed in the integer program (:func:`fix_labels`).  Training leaves out the classes
-        whose out-of-fold kept set ranks below the detector's own set (:func:`engine.ssvm.train_crf`).
+        are fixed in the integer program (:func:`fix_labels`).  ``train-crf`` keeps only the classes
+        whose out-of-fold kept set beats the detector's own set (:mod:`engine.crf_validation`).
         None: every class.
     """
 

@@ -16,7 +16,8 @@ decided by weights learnt on the other buildings):
 
 The shipped model's CRF, trained on two 120 m2 buildings, dropped every column on every held-out
 building (its column bias was learnt from 14 columns ranked at 13.6 AP): the gate gives them back
-to the detector.  Fewer than two buildings: no folds, the first candidate, every class decided.
+to the detector.  Fewer than two buildings: no folds, no choice (the caller's miss cost), every
+class decided.
 """
 from __future__ import annotations
 
@@ -69,8 +70,10 @@ def gate(ap_crf: np.ndarray, ap_set: np.ndarray, margin: float = MARGIN) -> np.n
 def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_space: Sequence[Sequence[dict]],
            labels: Sequence[np.ndarray], buildings: Sequence[Any], miss_costs: Sequence[float], init: CRFWeights,
            fit: Any, *, client=None, settings: CRFSettings | None = None, iou: float = 0.5,
-           say=None) -> tuple[float, np.ndarray, dict[str, Any]]:
+           say=None) -> tuple[float | None, np.ndarray, dict[str, Any]]:
     """Miss cost and ``decides`` mask by building-wise folds; also the JSON report of the choice.
+
+    With fewer than two buildings nothing can be chosen: the miss cost is None, every class decided.
 
     Parameters
     ----------
@@ -97,7 +100,7 @@ def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
                               "buildings": len(names)}
     if len(names) < 2:
         report["folds"] = 0
-        return costs[0], np.ones(N_CLASSES, dtype=bool), report
+        return None, np.ones(N_CLASSES, dtype=bool), report
     bid = np.array([names.index(str(b)) for b in buildings])
     n_folds = min(FOLDS, len(names))
     fold = building_folds(bid, n_folds)

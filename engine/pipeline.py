@@ -39,6 +39,7 @@ import numpy as np
 from engine.cluster import pin_library_threads
 from engine.stages import StageLog, StageRecord, Timer, failures_recorded, fingerprint
 from tiles import paths
+from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
 from tiles.store import TileStore, open_store
 
@@ -168,7 +169,7 @@ def _compute(input: str, out: str, client, opt: RunOptions, timings: dict[str, f
         timings["crf"] = t.seconds
         log.write(StageRecord("crf", fp_crf, "ok", t.seconds, outputs={"elements": len(elements)}))
         decided = crf_report.get("decides")
-        who = ("" if decided is None or len(decided) == 12 else
+        who = ("" if decided is None or len(decided) == len(ELEMENT_CLASSES) else
                f"; the CRF decides {', '.join(decided) if decided else 'no class'}, the others keep the "
                "detector's decision (score > 0)")
         say(f"crf: kept {len(elements)} of {len(proposals)} proposals{who} ({t.seconds:.1f} s)")

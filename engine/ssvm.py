@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from engine import config
-from engine.crf import CRFSettings, CRFWeights, build_graph, energies, fixed_labels, joint_feature, solve_fixed
+from engine.crf import CRFSettings, CRFWeights, build_graph, energies, joint_feature, solve_ip
 from engine.metrics.detection import boxes_array, match_detections
 from engine.proposals import Proposal
 from tiles.tasks import run_tasks
@@ -98,11 +98,8 @@ def _oracle(example: tuple[list[Proposal], np.ndarray], weights: CRFWeights,
     proposals, ystar = example
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
-    fixed = fixed_labels(graph, weights)
-    if fixed is not None:  # labels the CRF does not decide are its target as they are
-        ystar = np.where(fixed >= 0, fixed == 1, ystar)
     # the loss is linear in y: miss_cost * y* (1 - y) + (1 - y*) y = const + (1 - y* - miss_cost y*) y
-    yhat, info = solve_fixed(unary + np.where(ystar, -miss_cost, 1.0), graph.edges, pairwise, fixed, settings)
+    yhat, info = solve_ip(unary + np.where(ystar, -miss_cost, 1.0), graph.edges, pairwise, settings)
     psi = joint_feature(graph, ystar) - joint_feature(graph, yhat)
     loss = hamming_loss(ystar, yhat, miss_cost)
     return {"psi": psi, "loss": loss, "hinge": loss - float(weights.vector() @ psi), "status": info["status"]}
@@ -113,7 +110,7 @@ def _predict(example: tuple[list[Proposal], np.ndarray], weights: CRFWeights, se
     proposals, ystar = example
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
-    y, info = solve_fixed(unary, graph.edges, pairwise, fixed_labels(graph, weights), settings)
+    y, info = solve_ip(unary, graph.edges, pairwise, settings)
     return {"errors": int(np.sum(y != ystar)), "nodes": len(y), "status": info["status"]}
 
 
@@ -333,13 +330,14 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
     lam, iterations, tol, client, settings
         See :func:`fit_ssvm`.
     miss_cost
-        One miss cost (see :func:`fit_ssvm`); None: the candidates ``miss_costs``.
+        One miss cost (see :func:`fit_ssvm`); None: chosen among ``miss_costs`` when there are folds,
+        else ``buildingparser.crf.ssvm.miss-cost``.
     iou_threshold
         Matching threshold of the labels; None reads ``buildingparser.crf.ssvm.iou``.
     buildings
         The building of each space.  Given (and at least two buildings), the miss cost among the
         candidates and the classes the CRF decides are chosen by building-wise folds
-        (:func:`engine.crf_validation.choose`); None: the first candidate, every class decided.
+        (:func:`engine.crf_validation.choose`); None or one building: ``miss_cost``, every class decided.
         The weights are learnt with every class free either way (as in the folds); the returned
         :attr:`~engine.crf.CRFWeights.decides` says where they decide when used.
     miss_costs
@@ -363,20 +361,21 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
         if first is None:
             raise ValueError("no proposals to train on")
         grid = int(np.asarray(first.occupancy).shape[0])
-    costs = [float(miss_cost)] if miss_cost is not None else [float(c) for c in (
-        miss_costs if miss_costs is not None else config.get("crf.train.miss-costs", None)
-        or [config.get("crf.ssvm.miss-cost", 1.0)])]
+    default = float(config.get("crf.ssvm.miss-cost", 1.0) if miss_cost is None else miss_cost)
+    costs = [default] if miss_cost is not None else [float(c) for c in (
+        miss_costs if miss_costs is not None else config.get("crf.train.miss-costs", None) or [default])]
     jobs = [(list(p), list(g)) for p, g in zip(proposals_per_space, ground_truth_per_space)]
     labels = run_tasks(_label_task, jobs, client=client, label="S-SVM labels", extra_args=(iou,))
     init = CRFWeights.new(grid, k=k)
     fit_kw = dict(lam=lam, iterations=iterations, tol=tol, client=client, settings=settings)
     validation = None
-    cost = costs[0]
+    cost = default
     if buildings is not None:
-        cost, decides, validation = choose(
+        chosen, decides, validation = choose(
             [p for p, _ in jobs], [g for _, g in jobs], labels, list(buildings), costs, init,
             lambda ex, w, c: fit_ssvm(ex, w, miss_cost=c, **fit_kw).weights, client=client, settings=settings,
             iou=iou, say=say)
+        cost = default if chosen is None else chosen
     # every class free, as in the folds that chose the gate; the gate applies when the weights are used
     res = fit_ssvm([(p, y) for (p, _), y in zip(jobs, labels)], init, miss_cost=cost, **fit_kw)
     if validation is not None:

@@ -103,7 +103,11 @@ def test_train_crf_with_buildings_fixes_the_undecided_classes(client):
     assert v["folds"] == 2 and set(v["candidates"]) == {"2", "8"} and report["miss_cost"] in (2.0, 8.0)
     assert w1.decides.tolist() == [c in v["decides"] for c in v["detector_set"]]
     single: dict = {}
-    w3 = train_crf(props, gts, report=single, **kw)  # no buildings: the first candidate, every class decided
+    kw["miss_costs"] = [8.0, 32.0]  # no buildings: nothing to choose on, so crf.ssvm.miss-cost (2), every class
+    w3 = train_crf(props, gts, report=single, **kw)
     assert single["miss_cost"] == 2.0 and single["validation"] is None and w3.decides.all()
+    one: dict = {}
+    train_crf(props, gts, buildings=["b0"] * len(props), report=one, **kw)  # one building: the same
+    assert one["miss_cost"] == 2.0 and one["validation"]["folds"] == 0
     with pytest.raises(ValueError, match="building label"):
         train_crf(props, gts, buildings=blds[:1], **kw)

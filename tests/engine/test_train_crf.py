@@ -58,7 +58,7 @@ def test_train_crf_writes_weights_into_the_model(small_model, client, capsys):
     assert t["data"] == ["synthetic seed 13"] and t["synthetic"]["first_seed"] == 13
     assert (t["spaces"], t["proposals"], t["positives"], t["iterations"]) == (spaces, props, true, iters)
     assert 0 < true < props and spaces >= 2 and 1 <= iters <= 15
-    # one building: no folds to choose on, so the first miss cost and every class decided
+    # one building: no folds to choose on, so crf.ssvm.miss-cost and every class decided
     assert t["validation"] == {"rule": t["validation"]["rule"], "buildings": 1, "folds": 0}
     assert t["miss_cost"] == 2.0 and w.decides.all() and "deciding ceiling, floor, wall" in out
     assert float(m.group(5)) == pytest.approx(t["errors"]["initial"], abs=1e-3)
