@@ -42,6 +42,7 @@ from tiles import paths
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
 from tiles.store import TileStore, open_store
+from tiles.tasks import quiet_progress
 
 #: Stages in order; redoing one invalidates the records of every later one.
 STAGES = ("ingest", "spaces", "detection", "crf", "space_update", "labels", "export")
@@ -93,16 +94,17 @@ def run(input: str, out: str, *, client=None, options: RunOptions | None = None)
     staging = tempfile.mkdtemp(prefix="buildingparser-run-")
     try:
         with performance_report(client, os.path.join(staging, "dask-report.html"), opt.say):
-            store, final, elements, metrics = _compute(input, out, client, opt, timings)
-        _write_small_outputs(store, final, elements, metrics, staging, client)
+            metrics, stats = _compute(input, out, client, opt, timings, staging)
+        _write_metrics_outputs(metrics, stats, staging)
         _publish(staging, out, opt)
         return metrics
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _compute(input: str, out: str, client, opt: RunOptions, timings: dict[str, float]):
-    """Every stage up to the metrics; returns the store, the final spaces, the elements and the metrics."""
+def _compute(input: str, out: str, client, opt: RunOptions, timings: dict[str, float], staging: str):
+    """Every stage up to the metrics, and the outputs but ``metrics.json`` and the report into ``staging``;
+    returns the metrics and the space statistics."""
     from engine.crf import CRFWeights, apply_crf
     from engine.detection import DetectionSettings, detect
     from engine.labels import label_points, write_elements_json
@@ -205,27 +207,54 @@ def _compute(input: str, out: str, client, opt: RunOptions, timings: dict[str, f
         say(f"labels: classification and element_id written ({t.seconds:.1f} s)")
 
     # -- outputs ----------------------------------------------------------------------------------
+    # points.laz is written while the metrics and the small outputs are computed: those need the labels, not
+    # the file, and their tasks and driver work fill the export's idle moments (its two task batches' ends).
     store.refresh()
     fp_export = fingerprint("export", paths.join(out, "points.laz"), fp_labels, fp_update)
-    if opt.export_points:
-        target = paths.join(out, "points.laz")
-        if _skip(log, "export", fp_export, opt) and paths.exists(target, opt.storage_options):
-            say("points.laz: up to date (skipped)")
-        else:
-            from tiles.export import export
-
-            with failures_recorded(log, "export", fp_export), Timer() as t:
-                export(store, target, client=client, overwrite=True, storage_options=opt.storage_options)
-            timings["export"] = t.seconds
-            log.write(StageRecord("export", fp_export, "ok", t.seconds))
-            say(f"points.laz: {store.meta.point_count:,} points ({t.seconds:.1f} s)")
-
-    with Timer() as t:
-        metrics = _metrics(store, input, parsed, final, proposals, elements, crf_report, client, has_truth)
-    timings["metrics"] = t.seconds
+    export_job = _start_export(store, out, client, opt, log, fp_export, timings)
+    try:
+        with quiet_progress(export_job is not None):
+            with Timer() as t:
+                metrics = _metrics(store, input, parsed, final, proposals, elements, crf_report, client, has_truth)
+            timings["metrics"] = t.seconds
+            stats = _write_plan_outputs(store, final, elements, staging, client)
+    except Exception:
+        if export_job is not None:  # let it end (its file is written under a temporary name); this error wins
+            with contextlib.suppress(Exception):
+                export_job.result()
+        raise
+    if export_job is not None:
+        export_job.result()  # an export failure (recorded in the store) is the run's
     metrics["timings"], metrics["skipped"] = _all_timings(log, timings)
     metrics["points_written"] = bool(opt.export_points)
-    return store, final, elements, json_safe(metrics)
+    return json_safe(metrics), stats
+
+
+def _start_export(store: TileStore, out: str, client, opt: RunOptions, log: StageLog, fp_export: str,
+                  timings: dict[str, float]):
+    """Write ``points.laz`` in a thread of the driver; returns its future (None when there is nothing to do)."""
+    if not opt.export_points:
+        return None
+    target = paths.join(out, "points.laz")
+    if _skip(log, "export", fp_export, opt) and paths.exists(target, opt.storage_options):
+        opt.say("points.laz: up to date (skipped)")
+        return None
+    from concurrent.futures import ThreadPoolExecutor
+
+    from tiles.export import export
+
+    def job() -> None:
+        with failures_recorded(log, "export", fp_export), Timer() as t:
+            export(store, target, client=client, overwrite=True, storage_options=opt.storage_options)
+        timings["export"] = t.seconds
+        log.write(StageRecord("export", fp_export, "ok", t.seconds))
+        opt.say(f"points.laz: {store.meta.point_count:,} points ({t.seconds:.1f} s)")
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="buildingparser-export")
+    try:
+        return pool.submit(job)
+    finally:
+        pool.shutdown(wait=False)  # the thread ends with its job
 
 
 # -- stages' helpers ---------------------------------------------------------------------------------
@@ -455,10 +484,10 @@ def _metrics(store: TileStore, input: str, parsed, final, proposals, elements, c
     return _plain(m)
 
 
-def _write_small_outputs(store: TileStore, final, elements, metrics: dict[str, Any], staging: str, client) -> None:
+def _write_plan_outputs(store: TileStore, final, elements, staging: str, client) -> dict[str, Any]:
+    """``spaces.geojson``, ``elements.json`` and ``floorplan.png`` into ``staging``; returns the space statistics."""
     from engine.floorplan import draw_floorplan
     from engine.labels import element_records, write_elements_json
-    from engine.report import write_report
     from engine.space_stats import add_statistics_to_geojson, space_statistics
     from engine.spaces_geojson import spaces_feature_collection
 
@@ -469,6 +498,13 @@ def _write_small_outputs(store: TileStore, final, elements, metrics: dict[str, A
         json.dump(json_safe(add_statistics_to_geojson(geo, stats)), f, allow_nan=False)
     write_elements_json(elements, os.path.join(staging, "elements.json"))
     draw_floorplan(store, final, os.path.join(staging, "floorplan.png"), client=client)
+    return stats
+
+
+def _write_metrics_outputs(metrics: dict[str, Any], stats: dict[str, Any], staging: str) -> None:
+    """``metrics.json`` and ``report.html`` into ``staging`` (after every stage, for the timings)."""
+    from engine.report import write_report
+
     with open(os.path.join(staging, "metrics.json"), "w") as f:
         json.dump(metrics, f, indent=1, allow_nan=False)
     write_report(staging, metrics=metrics, statistics=stats)

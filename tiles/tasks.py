@@ -8,9 +8,11 @@ silent hole.  Without a client the tasks run one after another in this process
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import dask
@@ -29,12 +31,25 @@ class TaskFailures(Exception):
         super().__init__(f"{label}: {len(failures)} task(s) failed: {shown}{more}")
 
 
+_QUIET = contextvars.ContextVar("buildingparser_quiet_progress", default=False)
+
+
+@contextlib.contextmanager
+def quiet_progress(quiet: bool = True) -> Iterator[None]:
+    """No progress lines from the batches of this thread in the block (another thread's batch shows its own)."""
+    token = _QUIET.set(bool(quiet) or _QUIET.get())
+    try:
+        yield
+    finally:
+        _QUIET.reset(token)
+
+
 class Progress:
     """Progress of a batch on stderr: a live line on a terminal, a few lines otherwise."""
 
     def __init__(self, label: str, total: int):
         mode = dask.config.get("buildingparser.progress", "auto")
-        self.enabled = mode == "always" or (mode == "auto" and total > 1)
+        self.enabled = not _QUIET.get() and (mode == "always" or (mode == "auto" and total > 1))
         self.tty = sys.stderr.isatty()
         self.label, self.total, self.done = label, total, 0
         self.start = time.perf_counter()

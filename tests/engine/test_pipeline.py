@@ -149,6 +149,52 @@ def test_a_failing_space_is_reported_recorded_and_leaves_no_report(building, mon
     assert not (out / "report.html").exists()
 
 
+def test_export_runs_beside_the_metrics_and_its_failure_is_the_runs(building, client, monkeypatch, tmp_path):
+    """points.laz is written in a thread while the metrics run; a failed export fails the run, recorded, with no
+    report, and a failure of the metrics is the one raised even when the export fails too."""
+    _, laz, model = building
+    import engine.pipeline as pl
+    import tiles.export as ex
+
+    threads = {}
+    real_export, real_metrics = ex.export, pl._metrics
+
+    def broken_export(*a, **kw):
+        import threading
+
+        threads["export"] = threading.current_thread().name
+        raise TaskFailures("writing points", [("unit 0", OSError("simulated disk full"))])
+
+    def metrics_here(*a, **kw):
+        import threading
+
+        threads["metrics"] = threading.current_thread().name
+        return real_metrics(*a, **kw)
+
+    monkeypatch.setattr(ex, "export", broken_export)
+    monkeypatch.setattr(pl, "_metrics", metrics_here)
+    out = tmp_path / "export-fails"
+    with pytest.raises(TaskFailures, match="simulated disk full"):
+        run(str(laz), str(out), client=client, options=RunOptions(model=model, say=lambda s: None))
+    assert threads["export"].startswith("buildingparser-export") and threads["metrics"] != threads["export"]
+    assert not (out / "report.html").exists() and not (out / "points.laz").exists()
+    log = StageLog(open_store(str(out / "store.zarr")))
+    assert log.get("export").status == "failed" and log.get("labels").status == "ok"
+
+    def broken_metrics(*a, **kw):
+        raise ValueError("simulated metrics bug")
+
+    monkeypatch.setattr(pl, "_metrics", broken_metrics)
+    with pytest.raises(ValueError, match="simulated metrics bug"):
+        run(str(laz), str(out), client=client, options=RunOptions(model=model, say=lambda s: None))
+    assert not (out / "report.html").exists()
+    monkeypatch.setattr(ex, "export", real_export)
+    monkeypatch.setattr(pl, "_metrics", real_metrics)
+    metrics = run(str(laz), str(out), client=client, options=RunOptions(model=model, say=lambda s: None))
+    assert "export" not in metrics["skipped"] and metrics["timings"]["export"] > 0
+    assert (out / "points.laz").is_file() and (out / "report.html").is_file()
+
+
 def test_cli_run_and_its_errors(building, client, tmp_path, capsys):
     _, laz, model = building
     bad = tmp_path / "bad.laz"
