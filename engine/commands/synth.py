@@ -37,6 +37,7 @@ examples:
   buildingparser synth s3dis_like --format s3dis --area-m2 900 --density 2000
   buildingparser synth hard.zarr --area-m2 900 --floors 2 --hard
   buildingparser synth glassy.zarr --area-m2 600 --hard glass,registration=0.5
+  buildingparser synth b1100.zarr --seed 1100 --area-m2 250 --training-yaw   # as make model's
 """
 
 
@@ -57,8 +58,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--density", type=float, metavar="D",
                         help="points per m^2 of scanned surface before each space's x0.5-x2 factor "
                              "(default: buildingparser.synth.density, 8000: S3DIS-like)")
-    parser.add_argument("--yaw", type=float, default=0.0, metavar="DEG",
-                        help="rotate the whole building by DEG degrees about the vertical (default 0)")
+    turn = parser.add_mutually_exclusive_group()
+    turn.add_argument("--yaw", type=float, default=0.0, metavar="DEG",
+                      help="rotate the whole building by DEG degrees about the vertical (default 0)")
+    turn.add_argument("--training-yaw", action="store_true",
+                      help="the yaw that `train --synthetic` gives the building of this seed "
+                           "(engine.training.synthetic_yaw): the same building as train generates")
     parser.add_argument("--offset", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
                         help="world position of the building's local origin, e.g. 500000 4100000 30 (default 0 0 0)")
     parser.add_argument("--format", choices=("store", "laz", "s3dis"),
@@ -85,6 +90,10 @@ def run(args: argparse.Namespace) -> int:
     from engine.synth.writers import precheck
 
     fmt = args.format or ("laz" if args.out.lower().endswith((".las", ".laz")) else "store")
+    if args.training_yaw:
+        from engine.training import synthetic_yaw
+
+        args.yaw = synthetic_yaw(args.seed)
     check_parameters(area_m2=args.area_m2, rooms=args.rooms, floors=args.floors, density=args.density, yaw=args.yaw,
                      offset=args.offset, hardness=args.hard)
     precheck(args.out, fmt, overwrite=args.overwrite, storage_options=args.storage_options)

@@ -219,11 +219,13 @@ def test_a_spaces_one_ceiling_is_its_highest_window_and_its_floor_its_lowest():
         DetectionSettings(surface_choice="highest")
 
 
-@pytest.mark.parametrize("choice", ["extreme", "score"])
-def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path, choice):
-    """``surface-choice: extreme``: each space's ceiling is at its ground-truth height (within 5 cm), not at the
-    beams' undersides; with ``score`` (the best window, searched beside it only) at least one is not."""
-    import dataclasses
+def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path):
+    """``surface-choice: extreme`` (the default): each space's ceiling is at its ground-truth height (within 5 cm),
+    not at the beams' undersides.
+
+    (With the shipped model of session 10, ``score`` -- the best window, searched beside it only -- put one of
+    these ceilings at the beams; the model trained with 250 m2 buildings too finds them with either rule, so
+    the rules' difference is tested on hand-made windows in the test above, not on this building.)"""
 
     from engine.detection import detect_space
     from engine.model import load_model
@@ -235,7 +237,8 @@ def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path, choice)
     gt = store.doc("ground_truth")["elements"]
     assert sum(e["class"] == "beam" for e in gt) >= 3  # the building this test needs
     origin = np.asarray(store.meta.origin)
-    settings = dataclasses.replace(DetectionSettings.from_config(), surface_choice=choice)
+    settings = DetectionSettings.from_config()
+    assert settings.surface_choice == "extreme"
     model = load_model(None)
     errors = []
     for ref in index_spaces(store, "gt_space"):
@@ -244,10 +247,7 @@ def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path, choice)
         got = [p for p in props if p.class_code == 0]  # ceiling
         assert len(got) == 1 and len(want) == 1
         errors.append(abs(got[0].center[2] - want[0]["center"][2]))
-    if choice == "extreme":
-        assert max(errors) < 0.05, errors
-    else:
-        assert max(errors) >= 0.05, errors
+    assert max(errors) < 0.05, errors
 
 
 def test_a_models_box_regression_moves_its_classes_detections(buildings, trained):

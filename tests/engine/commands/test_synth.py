@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import re
 
+import pytest
+
 from engine.cli import build_parser, main
 
 
@@ -46,3 +48,25 @@ def test_cli_hard_adds_the_difficulties_asked_for(tmp_path, client, capsys):
     assert len(open_store(str(tmp_path / "all.zarr")).doc("ground_truth")["building"]["hardness"]) == 12
     assert main(["synth", str(tmp_path / "x.zarr"), "--hard", "glas"]) == 2
     assert "unknown difficulty" in capsys.readouterr().err
+
+
+def test_cli_training_yaw_gives_the_building_train_generates(tmp_path, client, monkeypatch):
+    """``--training-yaw`` (what ``make model`` uses for its stores) passes train's seeded yaw to the generator."""
+    import engine.synth as synth
+    from engine.training import synthetic_yaw
+
+    seen = []
+    real = synth.generate
+
+    def spy(out, **kw):
+        seen.append(kw["yaw"])
+        return real(out, **kw)
+
+    monkeypatch.setattr(synth, "generate", spy)
+    args = ["--rooms", "3", "--density", "40", "--seed", "1103", "--scheduler", client.scheduler.address]
+    assert main(["synth", str(tmp_path / "t.zarr"), *args, "--training-yaw"]) == 0
+    assert main(["synth", str(tmp_path / "y.zarr"), *args, "--yaw", "12.5"]) == 0
+    assert seen == [synthetic_yaw(1103), 12.5] and synthetic_yaw(1103) not in (0.0, 12.5)
+    with pytest.raises(SystemExit) as stop:  # one or the other: argparse's usage error
+        main(["synth", str(tmp_path / "z.zarr"), "--yaw", "3", "--training-yaw"])
+    assert stop.value.code == 2
