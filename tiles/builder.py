@@ -37,7 +37,7 @@ from tiles import paths, zarrio
 from tiles.errors import UserError
 from tiles.schema import (META_KEY, POINT_INDEX, SCHEMA_VERSION, Dimension, Part, Source, StoreMeta,
                           TileInfo)
-from tiles.store import TileStore, _open_group, tile_name, utc_now
+from tiles.store import TileStore, _open_group, tile_name, utc_now, write_doc
 from tiles.tasks import run_tasks
 
 
@@ -350,7 +350,7 @@ class StoreBuilder:
                          las=las, created=utc_now(), software=_software(), complete=False)
         root = _open_group(self.build_url, self.storage_options, mode="r+")
         for name, doc in (docs or {}).items():
-            root.require_group(f"meta/{name}").attrs["doc"] = doc
+            write_doc(root, name, doc)
         paths.remove(paths.join(self.build_url, "_staging"), self.storage_options)
         meta.complete = True
         root.attrs[META_KEY] = meta.to_json()

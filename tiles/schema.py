@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 #: Bumped whenever a change would make older readers misread a store.
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: meta documents as JSON byte arrays (tiles.store.write_doc), not attributes
 FORMAT_NAME = "buildingparser-tiles"
 META_KEY = "buildingparser"
 

@@ -1,4 +1,4 @@
-"""Writing per-point results into a tile store (``TileStore.write_array``)."""
+"""Writing per-point results and documents into a tile store (``TileStore.write_array``, ``set_doc``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -37,3 +37,24 @@ def test_an_array_of_the_wrong_length_is_refused(tmp_path):
     t = store.tiles[0]
     with pytest.raises(ValueError, match="values for"):
         store.write_array(t, "space_id", np.zeros(t.count + 1, np.int32))
+
+
+def test_a_document_is_stored_as_json_bytes_and_replaces_the_old_one(tmp_path):
+    store = _store(tmp_path)
+    doc = {"proposals": [{"id": i, "score": i / 7, "box": [1.5, -2.0, float("nan")]} for i in range(500)]}
+    store.set_doc("big", doc)
+    g = zarr.open_group(str(tmp_path / "s.zarr"), mode="r")["meta/big"]
+    assert "doc" not in g.attrs and g["json"].dtype == np.uint8
+    got = TileStore(str(tmp_path / "s.zarr")).doc("big")
+    assert got["proposals"][499]["score"] == 499 / 7 and np.isnan(got["proposals"][0]["box"][2])
+    store.set_doc("big", {"proposals": []})
+    assert TileStore(str(tmp_path / "s.zarr")).doc("big") == {"proposals": []}
+    assert store.doc("absent") is None
+
+
+def test_a_schema_1_document_in_attributes_is_read_and_replaced(tmp_path):
+    store = _store(tmp_path)
+    zarr.open_group(str(tmp_path / "s.zarr"), mode="r+").require_group("meta/old").attrs["doc"] = {"a": 1}
+    assert store.doc("old") == {"a": 1}
+    store.set_doc("old", {"a": 2})
+    assert "doc" not in store.group["meta/old"].attrs and store.doc("old") == {"a": 2}

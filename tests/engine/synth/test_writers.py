@@ -59,7 +59,7 @@ def test_store_holds_the_scan_and_the_document(small, written):
     np.testing.assert_allclose(cols["xyz"], np.c_[ref["x"], ref["y"], ref["z"]], atol=0.6e-4, rtol=0)
     for k in GT + ["red"]:
         np.testing.assert_array_equal(cols[k], ref[k])
-    doc = store.group[f"meta/{DOC}"].attrs["doc"]
+    doc = store.doc(DOC)
     assert len(doc["spaces"]) == 6 and doc["elements"]
     ids, n = np.unique(cols["gt_instance"], return_counts=True)
     by_id = {e["id"]: e for e in doc["elements"]}
