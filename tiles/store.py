@@ -171,8 +171,16 @@ class TileStore:
         return read_doc(self.group, name)
 
     def set_doc(self, name: str, doc: dict[str, Any]) -> None:
-        """Store a JSON document under ``meta/<name>`` (driver only)."""
+        """Store a JSON document under ``meta/<name>`` (driver only).
+
+        A schema-1 store is marked schema 2 by its first new document, so that
+        an older reader refuses it instead of finding its documents missing.
+        """
         write_doc(self.group, name, doc)
+        meta = self.meta
+        if meta.schema_version < SCHEMA_VERSION:
+            meta.schema_version = SCHEMA_VERSION
+            self._save_meta(meta)
 
 
 #: The array of a ``meta/<name>`` group that holds its document's JSON text.

@@ -54,7 +54,11 @@ def test_a_document_is_stored_as_json_bytes_and_replaces_the_old_one(tmp_path):
 
 def test_a_schema_1_document_in_attributes_is_read_and_replaced(tmp_path):
     store = _store(tmp_path)
-    zarr.open_group(str(tmp_path / "s.zarr"), mode="r+").require_group("meta/old").attrs["doc"] = {"a": 1}
-    assert store.doc("old") == {"a": 1}
+    root = zarr.open_group(str(tmp_path / "s.zarr"), mode="r+")
+    root.require_group("meta/old").attrs["doc"] = {"a": 1}
+    root.attrs["buildingparser"] = {**root.attrs["buildingparser"], "schema_version": 1}
+    store = TileStore(str(tmp_path / "s.zarr"))
+    assert store.doc("old") == {"a": 1} and store.meta.schema_version == 1
     store.set_doc("old", {"a": 2})
     assert "doc" not in store.group["meta/old"].attrs and store.doc("old") == {"a": 2}
+    assert TileStore(str(tmp_path / "s.zarr")).meta.schema_version == 2  # older readers now refuse it
