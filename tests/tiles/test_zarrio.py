@@ -9,7 +9,7 @@ import pytest
 import zarr
 
 from tiles.store import tile_compressor
-from tiles.zarrio import array_files, write_array
+from tiles.zarrio import CHUNK_KEY_ENCODING, array_files, write_array
 
 DTYPES = ["uint8", "int8", "uint16", "int16", "uint32", "int32", "int64", "uint64", "float32", "float64"]
 
@@ -24,15 +24,17 @@ def test_zarr_reads_back_every_value_and_metadata_matches(tmp_path, dtype, n):
         values[10:20] = 0  # an all-zero chunk, which zarr leaves out
     g = zarr.open_group(str(tmp_path / "g"), mode="w")
     write_array(str(tmp_path / "g"), "fast", values, chunk=10)
-    ref = g.create_array("ref", data=values, chunks=(min(10, max(n, 1)),), compressors=tile_compressor())
+    ref = g.create_array("ref", data=values, chunks=(min(10, max(n, 1)),), compressors=tile_compressor(),
+                         chunk_key_encoding=CHUNK_KEY_ENCODING)
     got = zarr.open_group(str(tmp_path / "g"), mode="r")["fast"]
     assert got.dtype == ref.dtype and got.shape == ref.shape and got.chunks == ref.chunks
     np.testing.assert_array_equal(got[:], values)
     fast_meta = json.loads((tmp_path / "g" / "fast" / "zarr.json").read_text())
     ref_meta = json.loads((tmp_path / "g" / "ref" / "zarr.json").read_text())
     assert fast_meta == ref_meta
-    chunks = lambda a: sorted(os.listdir(tmp_path / "g" / a / "c")) if (tmp_path / "g" / a / "c").exists() else []
+    chunks = lambda a: sorted(os.listdir(tmp_path / "g" / a))
     assert chunks("fast") == chunks("ref")
+    assert not (tmp_path / "g" / "fast" / "c").exists()  # chunks beside zarr.json: no folder of their own
 
 
 def test_replacing_an_array(tmp_path):
@@ -41,7 +43,7 @@ def test_replacing_an_array(tmp_path):
     write_array(str(tmp_path / "g"), "a", np.arange(5, dtype="int32") + 1, chunk=10)
     a = zarr.open_group(str(tmp_path / "g"), mode="r")["a"]
     np.testing.assert_array_equal(a[:], [1, 2, 3, 4, 5])
-    assert sorted(os.listdir(tmp_path / "g" / "a" / "c")) == ["0"]
+    assert sorted(os.listdir(tmp_path / "g" / "a")) == ["c.0", "zarr.json"]  # the old chunks are gone
 
 
 def test_big_endian_input_is_stored_little_endian():
