@@ -11,8 +11,8 @@ shape, all-zero chunks left out as zarr does.  Chunk keys use the ``.``
 separator (``c.0``, a standard Zarr v3 chunk key encoding): the chunks sit
 beside ``zarr.json`` instead of in a ``c/`` folder of their own, one folder
 fewer per array (a 20 M-point store: 1,104 arrays, so 1,104 fewer directories to
-create; creating inodes is a good part of writing the tiles, see
-benchmarks/bench_ingest.py).  The store is read by zarr as usual;
+create; creating inodes is a good part of writing the tiles, see the
+README's Ingest figures).  The store is read by zarr as usual;
 ``tests/tiles/test_zarrio.py`` checks that zarr reads back every value and that
 the metadata equals zarr's own.
 """
