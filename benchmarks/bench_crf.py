@@ -3,7 +3,7 @@ ARI before and after the space update.
 
 Two parts:
 
-* **scenes** (always): hand-made proposal scenes (:mod:`engine.crf_scenes`, rooms
+* **scenes** (always): hand-made proposal scenes (:mod:`engine.crf.scenes`, rooms
   with near-duplicate and scattered false proposals), CRF weights learnt by the
   S-SVM on training scenes, then on held-apart scenes: the CRF solve time per
   space (median, max, solver statuses), the whole CRF stage on a LocalCluster
@@ -11,7 +11,7 @@ Two parts:
   same spaces (why 2 is the default), and the detection quality (the detection
   engineer's VOC evaluation) of the detector alone and with the CRF, two ways:
   *ranked* (mAP of all proposals ranked by the detector's score, and by the
-  CRF's contextual score, :func:`engine.crf.flip_margins`) and *final set*
+  CRF's contextual score, :func:`engine.crf.model.flip_margins`) and *final set*
   (the detector's own decision, score > 0, against the set the CRF keeps:
   mAP, precision, recall).
 * **buildings** (full runs only): generated buildings (:func:`engine.synth.generate`),
@@ -71,7 +71,7 @@ def _cluster(n: int):
 
 
 def _warm_up() -> None:
-    import engine.crf  # noqa: F401
+    import engine.crf.model  # noqa: F401
     from ortools.sat.python import cp_model  # noqa: F401
 
 
@@ -81,7 +81,7 @@ def _flat(groups):
 
 def _set_quality(groups, gt_groups, keep) -> dict[str, float]:
     """Precision and recall of a set of proposals (VOC matching within the set, space by space)."""
-    from engine.ssvm import proposal_labels
+    from engine.crf.ssvm import proposal_labels
 
     tp = n = 0
     for props, gts in zip(groups, gt_groups):
@@ -95,7 +95,7 @@ def _set_quality(groups, gt_groups, keep) -> dict[str, float]:
 
 def compare(groups, gt_groups, weights, *, client=None, settings=None, label="") -> tuple[dict[str, Any], list]:
     """The CRF against the detector alone on the same spaces: ranked lists and final sets."""
-    from engine.crf import apply_crf, rescored
+    from engine.crf.model import apply_crf, rescored
     from engine.metrics.detection import evaluate_detections
 
     flat, gts = _flat(groups), _flat(gt_groups)
@@ -133,9 +133,9 @@ def compare(groups, gt_groups, weights, *, client=None, settings=None, label="")
 
 def scenes_part(quick: bool) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Learn on training scenes, measure on held-apart scenes."""
-    from engine.crf import CRFSettings, apply_crf, build_graph, energies, solve_ip
-    from engine.crf_scenes import make_scenes
-    from engine.ssvm import train_crf
+    from engine.crf.model import CRFSettings, apply_crf, build_graph, energies, solve_ip
+    from engine.crf.scenes import make_scenes
+    from engine.crf.ssvm import train_crf
 
     n_train, n_test, fp = (6, 6, 1.5) if quick else (24, 24, 4.0)
     iterations = 8 if quick else 40
@@ -204,14 +204,14 @@ SEEDS = {"detector": [2000, 2001, 2002], "crf": [2003, 2004, 2005], "test": [200
 def buildings_part(workdir: str, seeds: dict[str, list[int]] | None = None,
                    area: float = 150.0) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Generated buildings (``seeds`` per role, ``area`` m² each): detector, CRF and test buildings kept apart."""
-    from engine.crf import apply_crf
-    from engine.detection import detect
+    from engine.crf.model import apply_crf
+    from engine.detection.detect import detect
     from engine.metrics.ari import distributed_ari
-    from engine.space_update import update_spaces
-    from engine.spaces import parse_spaces
-    from engine.ssvm import group_by_space, train_crf
+    from engine.spaces.update import update_spaces
+    from engine.spaces.parse import parse_spaces
+    from engine.crf.ssvm import group_by_space, train_crf
     from engine.synth import generate
-    from engine.training import synthetic_yaw, train
+    from engine.training.train import synthetic_yaw, train
     from tiles.store import open_store
 
     seeds = seeds or SEEDS

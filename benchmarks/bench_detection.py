@@ -7,15 +7,15 @@ model``: six buildings of 250 m2, seeds 1100-1105, and twenty of 80 m2, seeds
 2000-2001, 250 m2), so its row is the shipped model's table.  The paper's three
 ablations (no local geometry, no global geometry, no colour) are the full
 model's SVMs fitted again on the *same* training vectors without those columns
-(:func:`engine.training.refit_without`): same dictionary, and negatives mined
+(:func:`engine.training.train.refit_without`): same dictionary, and negatives mined
 with all features (mining again for each would triple the training time); they
-have no learned re-ranking (:mod:`engine.rescore`, learnt on the full model's
+have no learned re-ranking (:mod:`engine.detection.rescore`, learnt on the full model's
 scores), so the full model without it is a row too, their reference.  All
 five models are detected in one pass over each test space
-(:func:`engine.ablation.detect_many`: each window shape scored once for all
+(:func:`engine.training.ablation.detect_many`: each window shape scored once for all
 weights) and scored on the ground-truth spaces with VOC AP at 3D IoU 0.5 (per
 class, structural mean, furniture mean, mAP).  The full model is also scored on
-*predicted* spaces (``engine.spaces.parse_spaces``).  Point-level IoU of the
+*predicted* spaces (``engine.spaces.parse.parse_spaces``).  Point-level IoU of the
 full model's labels (ground-truth spaces) is reported.
 
 Speed, in the same run on the first test building:
@@ -77,9 +77,9 @@ def _knn_normals(xyz: np.ndarray, k: int = 16) -> np.ndarray:
 
 
 def _speed(store, model, client_2, quick: bool) -> dict[str, Any]:
-    from engine.detection import DetectionSettings, detect, detect_space, space_frame
-    from engine.features import SpaceVolume
-    from engine.spacedata import index_spaces, load_space
+    from engine.detection.detect import DetectionSettings, detect, detect_space, space_frame
+    from engine.detection.features import SpaceVolume
+    from engine.spaces.points import index_spaces, load_space
 
     refs = index_spaces(store, "gt_space")
     ref = max(refs, key=lambda r: r.count)
@@ -119,7 +119,7 @@ def _store(seed: int, gen_kw: dict[str, Any], client) -> Any:
     """The generated building ``seed`` (cached in ``$BUILDINGPARSER_BENCH_CACHE``, keyed by its parameters)."""
     from benchmarks.bench_spaces import _generator_version, cache_dir
     from engine.synth import generate
-    from engine.training import synthetic_yaw
+    from engine.training.train import synthetic_yaw
     from tiles.store import open_store
 
     yaw = synthetic_yaw(seed)
@@ -131,12 +131,12 @@ def _store(seed: int, gen_kw: dict[str, Any], client) -> Any:
 
 
 def run(quick: bool = False) -> dict[str, Any]:
-    from engine.ablation import detect_many
-    from engine.detection import detect
-    from engine.features import ABLATIONS
-    from engine.labels import label_points
+    from engine.training.ablation import detect_many
+    from engine.detection.detect import detect
+    from engine.detection.features import ABLATIONS
+    from engine.outputs.labels import label_points
     from engine.metrics.detection import PointEvaluation, evaluate_points, format_ap_table
-    from engine.training import TrainSettings, refit_without, train_with_samples
+    from engine.training.train import TrainSettings, refit_without, train_with_samples
     from tiles.classes import ELEMENT_CLASSES
 
     # full mode: the shipped model's training ('make model') and held-out buildings (benchmarks.shipped_model)
@@ -170,7 +170,7 @@ def run(quick: bool = False) -> dict[str, Any]:
             models[variant] = full if not disabled else refit_without(full, samples, disabled, settings)
             train_s[variant] = timing["train_s"] if not disabled else time.perf_counter() - t0
         del samples
-        # the ablations refit the SVMs only (engine.training.refit_without drops the re-ranking learnt on the
+        # the ablations refit the SVMs only (engine.training.train.refit_without drops the re-ranking learnt on the
         # full model's scores): the full model without its re-ranking is their reference
         models["full, no re-ranking"] = dataclasses.replace(full, rescorer=None)
         train_s["full, no re-ranking"] = timing["train_s"]
@@ -193,7 +193,7 @@ def run(quick: bool = False) -> dict[str, Any]:
         points = PointEvaluation(np.sum(pe, axis=0))
         # the full model on predicted spaces
         try:
-            from engine.spaces import parse_spaces
+            from engine.spaces.parse import parse_spaces
         except ImportError:
             parse_spaces = None
         if parse_spaces is not None:

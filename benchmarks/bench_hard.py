@@ -1,7 +1,7 @@
 """Space parsing on hard generated buildings (issue 8): paper Table 2 on a hard set, and what each difficulty costs.
 
 Two parts, on buildings of :mod:`engine.synth` with the difficulties of real
-scans (:mod:`engine.synth.hardness`):
+scans (:mod:`engine.synth.hard.hardness`):
 
 1. **The hard set**: six buildings (fixed seeds, sizes and yaws; two of them
    two storeys) with *every* difficulty at level 1.  Per building and on the
@@ -57,7 +57,7 @@ KEYS = ("ari_final", "ari_oversegmented", "ari_ransac", "ari_hough")
 
 def configurations() -> list[tuple[str, Any]]:
     """``("clean", None)``, one per difficulty, then ``("all", "all")``."""
-    from engine.synth.hardness import NAMES
+    from engine.synth.hard.hardness import NAMES
 
     return [("clean", None), *((n, n) for n in NAMES), ("all", "all")]
 
@@ -67,7 +67,7 @@ def hard_store(name: str, seed: int, area: float, floors: int, yaw: float, hardn
     """The cached store of one generated building with its difficulties (generated on first use)."""
     from benchmarks.bench_spaces import _generator_version, cache_dir
     from engine.synth import generate
-    from engine.synth.hardness import Hardness
+    from engine.synth.hard.hardness import Hardness
     from tiles.store import open_store
 
     levels = Hardness.parse(hardness).to_dict()
@@ -85,7 +85,7 @@ def table2_row(store, client) -> dict[str, Any]:
     from benchmarks.baselines.hough import hough_spaces
     from benchmarks.baselines.ransac import ransac_spaces
     from engine.metrics.ari import distributed_ari
-    from engine.spaces import parse_spaces
+    from engine.spaces.parse import parse_spaces
 
     t0 = time.perf_counter()
     parse = parse_spaces(store, client=client)

@@ -3,7 +3,7 @@
 On a generated building of about 48 M points (2,000 m² at 5,000 points per m²
 of scanned surface; ``--quick``: about 1 M), on a 2-worker LocalCluster:
 
-* ``histogram pass`` -- one pass of :func:`engine.histograms.segment_histograms`
+* ``histogram pass`` -- one pass of :func:`engine.spaces.histograms.segment_histograms`
   over every tile (read the coordinates, bin them in the aligned frame, locate
   them in the storeys' boxes, ONE keyed bincount per tile, blocks summed on the
   driver), as the first slicing pass does.
@@ -41,11 +41,11 @@ PARSE_TARGET_S = 60.0
 
 def _first_pass_inputs(store, client):
     """The frame, grid, storeys and one box per storey, as parse_spaces has them before its first slicing pass."""
-    from engine.histograms import BoxIndex, Grid
-    from engine.spaces import SpaceParams, SpaceParse
+    from engine.spaces.histograms import BoxIndex, Grid
+    from engine.spaces.parse import SpaceSettings, SpaceParse
 
     parse = SpaceParse.load(store)
-    p = SpaceParams.from_config()
+    p = SpaceSettings.from_config()
     grid = Grid.for_store(store, parse.frame, p.bin_width, p.z_bin)
     floors = np.array([[int(round((f.z_range[0] - parse.frame.origin[2]) / p.z_bin)),
                         int(round((f.z_range[1] - parse.frame.origin[2]) / p.z_bin))] for f in parse.floors])
@@ -66,8 +66,8 @@ def run(quick: bool = False) -> dict[str, Any]:
     import dask
     from distributed import Client, LocalCluster
 
-    from engine.histograms import accumulate, keyed_histogram, segment_histograms, share
-    from engine.spaces import parse_spaces
+    from engine.spaces.histograms import accumulate, keyed_histogram, segment_histograms, share
+    from engine.spaces.parse import parse_spaces
     from tiles.tasks import run_tasks
 
     spec, density = (QUICK, QUICK_DENSITY) if quick else (BIG, BIG_DENSITY)

@@ -9,7 +9,7 @@ format 7: x y z, intensity, returns, classification, gps_time, rgb; ``--quick``:
 * ``laspy LAZ, 1 thread`` -- ``laspy.read`` with the single-threaded lazrs
   backend, for scale;
 * ``ingest LAZ`` -- ``tiles.ingest.ingest`` on the cluster that ``buildingparser
-  ingest`` itself starts (``engine.cluster.cluster_client``: 2 single-threaded
+  ingest`` itself starts (``engine.pipeline.cluster.cluster_client``: 2 single-threaded
   workers, the libraries' own thread pools pinned to one thread; started before
   the clock): decode every part, stage it by tile, write every tile (Zarr,
   Blosc LZ4) and the metadata;
@@ -132,7 +132,7 @@ def run(quick: bool = False, repeat: int | None = None) -> dict[str, Any]:
     if not isinstance(repeat, int) or repeat < 1:
         raise ValueError(f"repeat must be a positive number of runs, not {repeat!r}")
     import engine  # noqa: F401 (configuration defaults)
-    from engine.cluster import cluster_client
+    from engine.pipeline.cluster import cluster_client
     from tiles.ingest import ingest
 
     n = 1_000_000 if quick else 20_000_000

@@ -1,4 +1,4 @@
-"""Speed of per-point labelling (:func:`engine.labels.label_arrays`) against the box-by-box loop it replaced.
+"""Speed of per-point labelling (:func:`engine.outputs.labels.label_arrays`) against the box-by-box loop it replaced.
 
 On a generated building (10.2 M points: 300 m² at the default density, turned 20 degrees;
 ``--quick``: a tiny one), every point of the store is labelled at once, as one
@@ -8,7 +8,7 @@ scaled by 0.9-1.1, yaw turned by up to 2 degrees), random scores (ties
 included) and random occupancy patterns (K = 4, about 80 % occupied), so that
 boxes overlap as uncut detections do.
 
-* ``bucketed`` -- :func:`engine.labels.label_arrays`: boxes bucketed into a grid,
+* ``bucketed`` -- :func:`engine.outputs.labels.label_arrays`: boxes bucketed into a grid,
   each point tested against the boxes of its cell, in bounded batches.
 * ``reference: box by box`` -- the former implementation, in the same run on
   the same points: boxes in score order, each against the slab of x-sorted
@@ -43,8 +43,8 @@ MARGIN = 0.02
 
 
 def box_by_box(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """The former :func:`engine.labels.label_arrays`: one box at a time over the x-sorted points (the reference)."""
-    from engine.labels import _world_bounds
+    """The former :func:`engine.outputs.labels.label_arrays`: one box at a time over the x-sorted points (the reference)."""
+    from engine.outputs.labels import _world_bounds
 
     n = len(xyz)
     cls = np.full(n, 12, dtype=np.uint8)
@@ -85,7 +85,7 @@ def box_by_box(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float) -> 
 
 def proposals_from_truth(store, seed: int = 0) -> list:
     """Three overlapping proposals per ground-truth element (its box and two jittered copies), world frame."""
-    from engine.proposals import Proposal
+    from engine.detection.proposals import Proposal
 
     rng = np.random.default_rng(seed)
     origin_shift = np.zeros(3)  # ground-truth boxes are in world coordinates already
@@ -108,7 +108,7 @@ def proposals_from_truth(store, seed: int = 0) -> list:
 def run(quick: bool = False) -> dict[str, Any]:
     import dask
 
-    from engine.labels import _boxes, label_arrays
+    from engine.outputs.labels import _boxes, label_arrays
 
     spec, density = (QUICK, QUICK_DENSITY) if quick else (BIG, BIG_DENSITY)
     with dask.config.set({"buildingparser.progress": "never"}):

@@ -1,7 +1,7 @@
 """The whole run (``buildingparser run``) on a generated building: per-stage speed and memory, scaling, tasks.
 
 For one generated LAZ building with ground truth, the pipeline
-(:func:`engine.pipeline.run`, every stage forced) runs on a LocalCluster of 1
+(:func:`engine.pipeline.run.run`, every stage forced) runs on a LocalCluster of 1
 worker and of 2 workers.  Reported per stage and cluster size: seconds, points/s,
 and the peak resident memory of the whole process tree and of its largest
 process; the task stream of the 2-worker run (tasks per stage, median and
@@ -191,7 +191,7 @@ def measure(source: str, out: str, workers: int, model: str | None, *, verbose: 
     """One forced run on a fresh LocalCluster of ``workers`` single-threaded workers."""
     from distributed import Client, LocalCluster, get_task_stream
 
-    from engine.pipeline import RunOptions, run
+    from engine.pipeline.run import RunSettings, run
 
     said: list[tuple[float, str]] = []
     marks: list[tuple[float, str, float, float]] = []
@@ -207,12 +207,12 @@ def measure(source: str, out: str, workers: int, model: str | None, *, verbose: 
     try:
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                           silence_logs=logging.ERROR, memory_limit="8GiB") as cluster, Client(cluster) as client:
-            client.run(lambda: __import__("engine.detection"))  # warm imports on the workers
+            client.run(lambda: __import__("engine.detection.detect"))  # warm imports on the workers
             worker_pids.update(client.run(os.getpid).values())
             with MemoryTrace() as mem, get_task_stream(client) as ts:
                 start = (time.time(), *_cpu_by_process(worker_pids))
                 t0 = time.perf_counter()
-                metrics = run(source, out, client=client, options=RunOptions(model=model, force=True, say=say))
+                metrics = run(source, out, client=client, options=RunSettings(model=model, force=True, say=say))
                 total = time.perf_counter() - t0
                 marks.append((time.time(), "end", *_cpu_by_process(worker_pids)))
             stream = ts.data
@@ -274,7 +274,7 @@ def run(quick: bool = False, *, area: float | None = None, density: float | None
                             yaw=23.0, format="store" if store else "laz", overwrite=True)
             n = int(info["points"])
         else:  # an existing store or file
-            from engine.pipeline import is_store
+            from engine.pipeline.run import is_store
             from tiles.store import open_store
 
             store = is_store(source)

@@ -6,7 +6,7 @@ rooms (the generator's ``openspace`` and ``lobby`` spaces and its non-rectangula
 rooms), at 1,000 points per m² of scanned surface (an eighth of S3DIS's density,
 to keep the suite a few minutes long).  ``--quick``: three tiny buildings.
 
-For each building: ``engine.spaces.parse_spaces`` on a 2-worker LocalCluster,
+For each building: ``engine.spaces.parse.parse_spaces`` on a 2-worker LocalCluster,
 then the distributed ARI of ``space_id`` (final) and of ``cell_id``
 (over-segmented) against ``gt_space``; the two baselines of
 :mod:`benchmarks.baselines` on the same store.  Target: mean ARI of the final
@@ -89,7 +89,7 @@ def run(quick: bool = False) -> dict[str, Any]:
     from benchmarks.baselines.hough import hough_spaces
     from benchmarks.baselines.ransac import ransac_spaces
     from engine.metrics.ari import distributed_ari
-    from engine.spaces import parse_spaces
+    from engine.spaces.parse import parse_spaces
 
     specs, density = (QUICK, QUICK_DENSITY) if quick else (BUILDINGS, DENSITY)
     rows = []

@@ -6,7 +6,7 @@ The README's table of the shipped model comes from this script::
     python -m benchmarks.shipped_model --model models/mine --seeds 2000 2001 2002
 
 Buildings are generated like the training ones (``engine.synth.generate`` with
-``engine.training.synthetic_yaw(seed)``) with seeds the model was not trained on
+``engine.training.train.synthetic_yaw(seed)``) with seeds the model was not trained on
 (``make model`` trains the detectors on 1000-1019 and the CRF on 5000-5001); each
 space is detected on its ground-truth points and scored with VOC AP at 3D IoU
 0.5 four ways: all proposals ranked by the detector's score, the detector's own
@@ -28,12 +28,12 @@ def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list
     """Per-class AP (fractions) of the four rankings, keyed by their names, plus ``seconds``."""
     from distributed import Client, LocalCluster
 
-    from engine.crf import CRFWeights, apply_crf, rescored
-    from engine.detection import detect
+    from engine.crf.model import CRFWeights, apply_crf, rescored
+    from engine.detection.detect import detect
     from engine.metrics.detection import evaluate_detections
-    from engine.model import load_model
+    from engine.detection.model import load_model
     from engine.synth import generate
-    from engine.training import synthetic_yaw
+    from engine.training.train import synthetic_yaw
     from tiles.store import open_store
 
     model = load_model(model_path)

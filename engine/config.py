@@ -17,8 +17,8 @@ _HERE = os.path.dirname(__file__)
 
 
 def register() -> None:
-    """Merge the engine's defaults (every ``engine/*.yaml``) under the user's settings."""
-    for path in sorted(glob.glob(os.path.join(_HERE, "*.yaml"))):
+    """Merge the engine's defaults (every ``engine/**/*.yaml``) under the user's settings."""
+    for path in sorted(glob.glob(os.path.join(_HERE, "**", "*.yaml"), recursive=True)):
         with open(path) as f:
             dask.config.update_defaults(yaml.safe_load(f) or {})
 

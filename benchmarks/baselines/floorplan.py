@@ -4,7 +4,7 @@ Both baselines (RANSAC planes, 2D Hough lines) only detect walls.  They are made
 into a space segmentation in the simplest honest way:
 
 1. storeys from the building's z histogram (the same slab search as our method,
-   :func:`engine.slicing.find_storeys`, so that storeys are not what is compared);
+   :func:`engine.spaces.slicing.find_storeys`, so that storeys are not what is compared);
 2. per storey, a sample of the points (at most ``max_points``) in memory;
 3. the detected wall segments are drawn as barriers (``barrier`` metres thick)
    on an occupancy raster of the storey (``pixel`` metres; a pixel is occupied
@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from engine.dividers import vertical_params
-from engine.histograms import share, z_histogram
+from engine.spaces.dividers import vertical_params
+from engine.spaces.histograms import share, z_histogram
 from engine.metrics.ari import ari_from_contingency, contingency_pairs, contingency_table, sum_pairs
-from engine.slicing import find_storeys
+from engine.spaces.slicing import find_storeys
 from tiles.tasks import run_tasks
 
 

@@ -328,7 +328,7 @@ def evaluate_detections(detections: Sequence[Any], ground_truth: Sequence[dict[s
     Parameters
     ----------
     detections
-        :class:`engine.proposals.Proposal` objects or ``elements.json`` records (world boxes).
+        :class:`engine.detection.proposals.Proposal` objects or ``elements.json`` records (world boxes).
     ground_truth
         The ``elements`` of a store's ``meta/ground_truth`` document (world boxes, ``space``).
     client

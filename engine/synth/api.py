@@ -5,7 +5,7 @@ import math
 import time
 from typing import Any
 
-from engine.synth.hardness import Hardness
+from engine.synth.hard.hardness import Hardness
 from engine.synth.plan import plan_building
 from engine.synth.writers import precheck, write_las, write_s3dis, write_store
 from tiles import paths
@@ -34,9 +34,9 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
     storage_options
         fsspec options when ``out`` is a store URL.
     hardness
-        Difficulties of real scans (:mod:`engine.synth.hardness`): ``"all"``,
+        Difficulties of real scans (:mod:`engine.synth.hard.hardness`): ``"all"``,
         ``"registration,glass"``, a list of names, ``{name: level}`` or a
-        :class:`~engine.synth.hardness.Hardness`; None: a clean building.
+        :class:`~engine.synth.hard.hardness.Hardness`; None: a clean building.
 
     Returns
     -------
@@ -47,7 +47,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
     Hardness.parse(hardness)
     precheck(out, format, overwrite=overwrite, storage_options=storage_options)
     if client is not None:
-        from engine.cluster import check_reachable
+        from engine.pipeline.cluster import check_reachable
 
         check_reachable(client, str(out))
     t0 = time.perf_counter()

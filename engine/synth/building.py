@@ -178,7 +178,7 @@ class Space:
     ``scanners`` the scan positions; ``density``, ``noise`` (sigma, metres) and
     ``brightness`` vary per space.
 
-    Hard scan conditions (:mod:`engine.synth.hardness`): ``scanned`` False for a
+    Hard scan conditions (:mod:`engine.synth.hard.hardness`): ``scanned`` False for a
     room never scanned (no points); ``registration`` ``(tx, ty, tz, angle, px,
     py)`` the rigid error of its scan (metres, radians about ``(px, py)``) and
     ``scan_jitter`` ``(k, 4)`` the residual error of each scan position
@@ -186,7 +186,7 @@ class Space:
     ``jitter_bound``; ``flying`` and ``ghosts`` the rates of flying points and of
     reflections in ``mirrors`` (window panes, :class:`Rect`) outside
     ``outline`` (the floor's outer polygon, local xy); ``stairs`` the stair of a
-    stair tower (see :mod:`engine.synth.hard_elements`).
+    stair tower (see :mod:`engine.synth.hard.elements`).
     """
 
     id: int
@@ -339,7 +339,7 @@ class Building:
         registered space's boxes move with its scan).
         ``counts`` is ``{"spaces": {id: n}, "elements": {id: n}}``.
 
-        With hard scan conditions (:mod:`engine.synth.hardness`), also: per
+        With hard scan conditions (:mod:`engine.synth.hard.hardness`), also: per
         space ``scanned`` (False: never scanned, no points), ``axis_deg`` (its
         own frame: a wing at an angle), ``registration`` (``{"offset": [dx, dy,
         dz], "yaw_deg", "pivot": [x, y]}`` world, the rigid error of its scan);

@@ -272,15 +272,15 @@ def furnish(rng: np.random.Generator, space: Space, walls: list[Wall], openings:
             hard=None) -> None:
     """Put the furniture and clutter of the space's type into ``space.elements``.
 
-    ``hard`` (a :class:`engine.synth.hardness.HardContext`) adds the pieces of
-    the difficulties (:mod:`engine.synth.hard_furniture`): tall cabinets on
+    ``hard`` (a :class:`engine.synth.hard.hardness.HardContext`) adds the pieces of
+    the difficulties (:mod:`engine.synth.hard.furniture`): tall cabinets on
     lined walls and hallway bottlenecks first, cubicles in open-plan offices,
     piles of boxes last.
     """
     p = Placer(rng, space, walls, style)
     p.hard = hard
     if hard is not None:
-        from engine.synth import hard_furniture
+        from engine.synth.hard import furniture as hard_furniture
 
         hard_furniture.before(p, walls, hard)
     _radiators(p, walls)
@@ -292,7 +292,7 @@ def furnish(rng: np.random.Generator, space: Space, walls: list[Wall], openings:
 
 
 def _stairs(p: Placer) -> None:
-    """A stair tower holds its stair (:mod:`engine.synth.hard_elements`), no furniture."""
+    """A stair tower holds its stair (:mod:`engine.synth.hard.elements`), no furniture."""
 
 
 def _desk_with_chair(p: Placer, *, free_xy=None, yaw=None, clutter_on=True) -> bool:
@@ -569,7 +569,7 @@ def _openspace(p: Placer) -> None:
             w, d = rng.uniform(1.2, 1.6), rng.uniform(0.7, 0.8)
             ax = np.array([-math.sin(yaw), math.cos(yaw)])
             if pods:  # a cubicle pod: low partitions between and beside the two desks
-                from engine.synth.hard_furniture import cubicle
+                from engine.synth.hard.furniture import cubicle
 
                 cubicle(p, np.array([x, y]), yaw, w, d)
             for sgn in (1, -1):

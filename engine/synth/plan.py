@@ -22,10 +22,11 @@ import numpy as np
 import shapely
 from shapely.geometry import box
 
-from engine.synth import colours, furniture, hard_plan, shapes, structure
+from engine.synth import colours, furniture, shapes, structure
+from engine.synth.hard import plan as hard_plan
 from engine.synth.building import Building, Element, FloorInfo, Frame, Opening, PartSpec, Space, Wall
-from engine.synth.hard_elements import stair_scanners
-from engine.synth.hardness import HardContext, Hardness, hard_rng
+from engine.synth.hard.elements import stair_scanners
+from engine.synth.hard.hardness import HardContext, Hardness, hard_rng
 from engine.synth.layout import CIRCULATION, Draft, floor_layout
 from tiles.errors import UserError
 
@@ -99,8 +100,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     part_points
         Largest estimated point count of one scan task; a bigger space is cut into pieces.
     hardness
-        The difficulties of real scans to add (:mod:`engine.synth.hardness`): a
-        :class:`~engine.synth.hardness.Hardness`, ``"all"``, ``"glass,wing"``, a
+        The difficulties of real scans to add (:mod:`engine.synth.hard.hardness`): a
+        :class:`~engine.synth.hard.hardness.Hardness`, ``"all"``, ``"glass,wing"``, a
         list of names or ``{name: level}``; None: a clean building.
     """
     area_m2, density = check_parameters(area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,

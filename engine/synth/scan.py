@@ -72,7 +72,7 @@ COLUMNS = {"x": np.float64, "y": np.float64, "z": np.float64, "red": np.uint16, 
 
 
 def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
-    """Scan one part (see the module docstring; hard scan conditions: :mod:`engine.synth.hard_scan`)."""
+    """Scan one part (see the module docstring; hard scan conditions: :mod:`engine.synth.hard.scan`)."""
     sp, part = job.space, job.part
     if not sp.scanned:
         return {k: np.empty(0, t) for k, t in COLUMNS.items()}
@@ -129,9 +129,9 @@ def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
 
 
 def _hard(job: ScanJob, P, S, first, rects, scanners, order, rgb, space, cls, inst):
-    """Flying points, reflections and registration errors (:mod:`engine.synth.hard_scan`)."""
-    from engine.synth import hard_scan
-    from engine.synth.hardness import hard_rng
+    """Flying points, reflections and registration errors (:mod:`engine.synth.hard.scan`)."""
+    from engine.synth.hard import scan as hard_scan
+    from engine.synth.hard.hardness import hard_rng
 
     sp = job.space
     if sp.flying > 0:

@@ -23,8 +23,8 @@ from shapely.geometry import LineString, Point, Polygon
 from engine.synth import colours
 from engine.synth.building import Element, Opening, Space, Wall
 from engine.synth.geometry import Box, Poly, Rect, at, rect
-from engine.synth.hard_elements import stair_elements, stair_slabs
-from engine.synth.hardness import HardContext
+from engine.synth.hard.elements import stair_elements, stair_slabs
+from engine.synth.hard.hardness import HardContext
 
 UP, DOWN = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])
 CASING_W, CASING_D = 0.07, 0.015

@@ -1,1 +1,0 @@
-"""One module per subcommand of ``buildingparser`` (see :mod:`engine.cli`)."""

@@ -1,0 +1,311 @@
+"""Ceiling dividers: where a ceiling stops, or changes height, there is a wall (issue 8: hard buildings).
+
+A room is closed above by its ceiling, a horizontal surface inside its
+storey.  Some spaces have none there: a **stair tower** is a shaft through the
+slabs, whose ceiling lies in the next storey (the underside of the slab above
+the well), and an atrium or a double-height hall is open to the storey above.
+Seen from a storey's upper band (above door height), such a space shows its
+walls and the flight rising through it, but no horizontal surface above.
+
+Peak-gap-peak (:mod:`engine.spaces.dividers`) measures a wall's void against the room
+level *in the upper band* on both sides of a face, and the ridge search
+(:mod:`engine.spaces.ridges`) needs a scanned ceiling on both sides: beside a shaft
+the room level on the shaft's side is nothing, so neither can find the wall
+between the shaft and its lobby, and the face reads open (h500-2storeys: the
+lobby merged with the stair tower).  Yet a ceiling that stops at a line is
+itself the evidence of a boundary: the part of a storey under a ceiling and
+the part with none are not one room.  So, in the refinement of a large space
+(:mod:`engine.spaces.refine`, where the space's points are in memory), a face without
+a divider whose one side has a ceiling along most of it and whose other side
+has none gets a ``"ceiling"`` divider (:func:`ceiling_dividers`).  Faces with
+a ceiling on both sides (rooms of different ceiling heights included) or on
+neither (inside the shaft, an unscanned room) are left as they were.
+
+*The ceiling* is told from walls and from the rest of the upper band by its
+shape (:meth:`engine.spaces.ridges.Occupancy.build` with ``max_span``): on a raster of
+``pixel`` metres, a pixel is ceiling where its upper-band points lie within
+``span`` metres of one height (a horizontal surface: scan noise and
+registration offsets of a few cm), not where they run down the upper band (a
+wall, a shaft's wall beside its landing: 0.3 m and more, from door height to
+the ceiling).  A side has a ceiling along a stretch of the face where such a
+pixel lies within ``side`` metres of it, and along the face where it has one
+along at least ``min_scanned`` of it.
+
+**Step lines.**  A room has one ceiling, and neighbouring rooms often have
+different ones (a hallway lowered for ducts, a higher lobby or conference
+room).  A line along which the ceiling changes height is a wall even where
+its points show no void and no ridge: a glazed partition returns few points
+(no ridge) and has no void between two faces, but the two rooms' ceilings
+still meet at it at two heights.  :func:`step_lines` finds such lines on the
+same raster (each ceiling pixel's height: the top of its points), the way
+ridge lines are found (:mod:`engine.spaces.ridges`): in every ``chunk`` along an
+axis, a pixel boundary is a step where the ``level_window`` metres on each
+side are each covered by ceiling (``min_scanned``) *at one height* (their
+spread between the 10 % and 90 % quantiles is below ``step``) and the two
+heights differ by at least ``step``; steps are followed from chunk to chunk
+and a line runs ``min_run`` metres at least.  A beam or a light panel under
+the ceiling is no step: beside it a window holds the ceiling too (or the
+beam's shadow on the ceiling, which is not scanned), so it is not at one
+height; ``level_window`` (1 m, the room level's reach in the void test) is
+wider than a beam and its shadow.  ``step`` (0.1 m) is well above the height
+noise of a scanned ceiling (scan noise and registration offsets of a few cm;
+a light panel's few cm).  The refinement adds the step lines to the ridge
+lines: slicing cuts at them, and merging divides the stretch of a face they
+cover.
+
+**A partition under the step.**  A ceiling also changes height where no wall
+stands: the free edge of a soffit or bulkhead along one side of an open-plan
+office or a lobby, a dropped ceiling over a reception area.  Seen from above
+such an edge is a step like any other; what tells it from a partition is
+below it.  A partition stands from the floor to the ceiling: glass returns
+few points, but some, and its mullions and rails, a door leaf or the glass or
+transom over a door return points at normal density, so nearly every
+stretch of the line holds some.  Under a soffit's edge there is open air:
+only the furniture that happens to stand there.  So a run of a step line
+divides only where at least ``min_partition`` (0.5: most) of its
+``ridges.chunk`` stretches hold a point within ``partition_tolerance`` (0.1
+m: the step is located to a pixel of the raster, and a partition's faces lie
+half its thickness from its middle) of the line's position in that stretch,
+between the *floor band* (``floor_band`` over the storey's floor: the floor,
+skirtings, floor tracks) and the *ceiling band* (``ceiling_band`` under the
+lower of the two ceilings: head tracks, trims, light fittings and the
+soffit's own face), which hold points under a soffit's edge too
+(:func:`partition_support`).  A stretch holds the partition only with a point
+in *each half* of that band (``both_halves``): a partition stands at all
+heights, while desks, chairs, counters and low cabinets, which may well stand
+under a soffit's edge, stay in the lower half (one band alone let three desks
+across a 6 m soffit edge make it a wall), and pendant lights or signs hang in
+the upper half only.  An open doorway in a partition holds nothing in the
+lower half for a stretch or two: ``min_partition`` 0.5 leaves room for doors
+(0.9 lost a glazed partition with an open door on a hard building).  The
+run's two end stretches are left out: the walls it meets stand there under a
+soffit's edge too.  What it
+still cannot tell: tall furniture (shelves, tall cabinets) standing under a
+soffit's edge along most of its length makes it a wall; a partition whose
+glass returns (almost) nothing, with mullions about 1 m apart or more and
+no door, may not be one (the two rooms then stay one space, as before the step
+lines).
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from engine.spaces.merging import Edge
+from engine.spaces.ridges import Occupancy, RidgeLine, RidgeSettings, _lines
+
+
+@dataclass(frozen=True)
+class CeilingSettings:
+    """The ceiling tests of the refinement: faces to a side without a ceiling, step lines (metres, fractions)."""
+
+    #: Points of one pixel within this height of each other are a horizontal surface (0: no ceiling dividers).
+    span: float = 0.1
+    #: Raster pixel.
+    pixel: float = 0.1
+    #: Depth of each side of a face searched for the ceiling.
+    side: float = 0.5
+    #: A side has a ceiling along a face when it has one along at least this fraction of the face.
+    min_scanned: float = 0.5
+    #: Two sides with a ceiling whose top levels differ by at least this much are under two ceilings (0: off).
+    step: float = 0.1
+    #: Each side of a step lies at one height over ``level_window`` m: the spread between the ``1 - level_quantile``
+    #: and ``level_quantile`` quantiles of its ceiling pixels' heights is below ``step``.
+    level_quantile: float = 0.9
+    level_window: float = 1.0
+    #: A step line divides only where at least this fraction of its ``ridges.chunk`` stretches hold a point
+    #: within ``partition_tolerance`` of it between the floor band and the ceiling band: the partition under a
+    #: step, which a soffit's free edge lacks (0: no test).
+    min_partition: float = 0.5
+    partition_tolerance: float = 0.1
+    #: The floor band (above the storey's floor) and the ceiling band (below the lower ceiling of the step) left
+    #: out of that test: floor, skirting, tracks, trims and fittings lie in them under a soffit's edge too.
+    floor_band: float = 0.2
+    ceiling_band: float = 0.2
+    #: A stretch holds the partition only with a point in each half of that band (a partition stands at all
+    #: heights; desks, chairs, counters and low cabinets stay in the lower half).
+    both_halves: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "CeilingSettings":
+        known = {f.name for f in dataclasses.fields(cls)}
+        d = {k.replace("-", "_"): v for k, v in d.items()}
+        types = {f.name: f.type for f in dataclasses.fields(cls)}
+        return cls(**{k: (bool(v) if types[k] in ("bool", bool) else float(v)) for k, v in d.items() if k in known})
+
+
+def ceiling_occupancy(bu, bv, bz, band_z: int, p: CeilingSettings, bin_width: float, z_bin: float) -> Occupancy:
+    """Where a storey's points show a ceiling: pixels whose upper-band points span at most ``span`` in height."""
+    pixel = max(1, int(round(p.pixel / bin_width)))
+    span = int(round(p.span / z_bin))
+    return Occupancy.build(bu, bv, bz, band_z, pixel, max_span=span)
+
+
+def ceiling_dividers(edges: list[Edge], ceiling: Occupancy, p: CeilingSettings, bin_width: float) -> list[Edge]:
+    """The edges, those without a divider between a side with a ceiling and a side without one divided.
+
+    A side has a ceiling along the face when at least ``min_scanned`` of the
+    face's stretch has a ceiling pixel within ``side`` metres on that side
+    (:meth:`engine.spaces.ridges.Occupancy.side_fraction`).  Returns new
+    :class:`engine.spaces.merging.Edge` objects where a divider was added (kind
+    ``"ceiling"``, at the face), the others unchanged.
+    """
+    if p.span <= 0 or ceiling.scanned.size == 0:
+        return edges
+    depth = max(1, int(round(p.side / bin_width)))
+    out = []
+    for e in edges:
+        if e.divider is None:
+            below, above = ceiling.side_profiles(e.axis, e.position, e.overlap[0], e.overlap[1], depth)
+            if len(below) and float(np.mean(below != above)) >= p.min_scanned:
+                e = dataclasses.replace(e, divider={"kind": "ceiling", "position": e.position * bin_width,
+                                                    "width": 0.0, "score": 0.0})
+        out.append(e)
+    return out
+
+
+def _window_levels(h: np.ndarray, s: int, c: int, q: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every pixel boundary ``i`` (0..n) along axis 0 and chunk ``k`` of ``c`` pixels along axis 1, over the
+    ``s`` pixels before ``i`` in the chunk: the median ceiling height, its spread (the ``q`` quantile less the
+    ``1 - q`` quantile) and the fraction of the window with a ceiling.
+
+    ``h``: heights, -1 where no ceiling.  Returns three arrays of shape ``(n + 1, chunks)``; level and spread
+    are NaN where the window holds no ceiling.
+    """
+    n, m = h.shape
+    k = -(-m // c)
+    hp = np.full((n + s, k * c), np.nan)
+    hp[s:, :m] = np.where(h >= 0, h, np.nan)
+    # the window ending at boundary i: rows i - s .. i - 1 of h, i.e. rows i .. i + s - 1 of hp
+    win = np.lib.stride_tricks.sliding_window_view(hp, s, axis=0)[: n + 1]  # (n + 1, k * c, s)
+    win = win.reshape(n + 1, k, c * s)
+    valid = ~np.isnan(win)
+    cnt = valid.sum(axis=2)
+    cover = cnt / float(c * s)
+    srt = np.sort(np.where(valid, win, np.inf), axis=2)  # the window's heights first, in order
+
+    def quantile(f: float) -> np.ndarray:
+        """``np.nanquantile(win, f, axis=2)`` (linear), vectorised (nanquantile loops over the windows)."""
+        pos = np.maximum(cnt - 1, 0) * f
+        i0 = np.floor(pos).astype(np.int64)
+        i1 = np.minimum(i0 + 1, np.maximum(cnt - 1, 0))
+        a = np.take_along_axis(srt, i0[..., None], axis=2)[..., 0]
+        b = np.take_along_axis(srt, i1[..., None], axis=2)[..., 0]
+        with np.errstate(invalid="ignore"):
+            return np.where(cnt > 0, a + (b - a) * (pos - i0), np.nan)
+
+    return quantile(0.5), quantile(q) - quantile(1.0 - q), cover
+
+
+def partition_support(normal: np.ndarray, along: np.ndarray, start: int, chunk: int, centre: np.ndarray,
+                      tolerance: int) -> np.ndarray:
+    """Per ``chunk``-bin stretch ``k`` along a line (from bin ``start``): whether a point lies within ``tolerance``
+    bins of ``centre[k]``, the line's position in that stretch.
+
+    ``normal``, ``along``: the bins of the points across and along the line (the caller keeps only those
+    between the floor band and the ceiling band).  A partition under a step (glass, its mullions and rails, a
+    door leaf or the transom over a door) returns points in nearly every stretch; the free edge of a soffit
+    has open air under it, and only furniture that happens to stand there.
+    """
+    n = len(centre)
+    k = (np.asarray(along) - start) // chunk
+    inside = (k >= 0) & (k < n)
+    k = k[inside]
+    near = np.abs(np.asarray(normal)[inside] - centre[k]) <= tolerance
+    return np.bincount(k[near], minlength=n)[:n] > 0
+
+
+def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettings, bin_width: float, z_bin: float,
+               ridges: Sequence[RidgeLine] = (), *, points: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+               floor_z: int | None = None) -> list[RidgeLine]:
+    """Lines along which the ceiling changes height over a partition (:class:`engine.spaces.ridges.RidgeLine`, in bins
+    of ``bin_width``).
+
+    In every ``ridge_params.chunk`` stretch along each axis, a pixel boundary is a step where the
+    ``level_window`` metres of ceiling before it and after it are each covered over at least ``min_scanned``,
+    each lie at one height (the spread between their ``1 - level_quantile`` and ``level_quantile`` quantiles is
+    below ``step``: one ceiling, not a window that straddles the step, and not a beam with the ceiling beside
+    it or its shadow), and their median heights differ by at least ``step`` metres.  Steps are followed from
+    chunk to chunk like ridges (:func:`engine.spaces.ridges._lines`: a line runs ``min_run`` m at least, within one
+    pixel); a line within ``min_spacing`` of a ridge line over the same stretch is that wall and is left out.
+
+    With ``min_partition`` > 0 a run of a line is kept only where a partition stands under it
+    (:func:`partition_support`): at least ``min_partition`` of its chunks, its first and last (the walls it
+    meets) not counted, hold a point of ``points`` (the space's ``bu``, ``bv``, ``bz`` bins, all heights)
+    within ``partition_tolerance`` of the line's position in that chunk, higher than ``floor_band`` over the
+    floor (``floor_z``, a z bin) and lower than ``ceiling_band`` under the lower of the step's two ceilings
+    (with ``both_halves``, one in each half of that band).  A soffit's or bulkhead's free edge is no wall.
+    """
+    if p.step <= 0 or p.span <= 0 or ceiling.height is None or ceiling.scanned.size == 0:
+        return []
+    test = p.min_partition > 0
+    if test and (points is None or floor_z is None):
+        raise ValueError("step_lines: min_partition > 0 needs the space's points and floor_z")
+    px = ceiling.pixel
+    pm = px * bin_width
+    s = max(1, int(round(p.level_window / pm)))
+    c = max(1, int(round(ridge_params.chunk / pm)))
+    rp = dataclasses.replace(ridge_params, drift=pm, width=pm)
+    need = p.step / z_bin
+    sp = int(round(ridge_params.min_spacing / bin_width))
+    if test:
+        bz = np.asarray(points[2])
+        z_lo = floor_z + int(round(p.floor_band / z_bin))
+        top = int(np.max(ceiling.height))
+        band = (bz >= z_lo) & (bz < top)  # the vertical band of every line lies within this one
+        pu, pv, pz = np.asarray(points[0])[band], np.asarray(points[1])[band], bz[band]
+        tol = int(round(p.partition_tolerance / bin_width))
+        cb = c * px
+        ceil_band = int(round(p.ceiling_band / z_bin))
+    out: list[RidgeLine] = []
+    for axis in (0, 1):
+        h = ceiling.height if axis == 0 else ceiling.height.T
+        n0, a0 = (ceiling.u0, ceiling.v0) if axis == 0 else (ceiling.v0, ceiling.u0)
+        before, spread_b, cov_b = _window_levels(h, s, c, p.level_quantile)
+        after, spread_a, cov_a = (x[::-1] for x in _window_levels(h[::-1], s, c, p.level_quantile))
+        # (reversed: the s pixels from boundary i on)
+        with np.errstate(invalid="ignore"):
+            diff = np.abs(before - after)
+            mask = ((cov_b >= p.min_scanned) & (cov_a >= p.min_scanned) & (diff >= need)
+                    & (spread_b < need) & (spread_a < need))
+        if test:
+            normal, along = (pu, pv) if axis == 0 else (pv, pu)
+            lower = np.fmin(before, after)  # the lower ceiling's level at each step (z bins)
+        for r in _lines(mask, np.nan_to_num(diff), axis, 0, 0, 1, rp, pm):
+            line = RidgeLine(axis, n0 + r.cut * px, tuple((a0 + a * c * px, a0 + b * c * px) for a, b in r.runs),
+                             r.strength, n0 + (r.lo if r.lo is not None else r.cut) * px,
+                             n0 + (r.hi if r.hi is not None else r.cut) * px)
+            if any(q.axis == axis and abs(q.cut - line.cut) < sp
+                   and any(q.covered(a, b) for a, b in line.runs) for q in ridges):
+                continue
+            if test:
+                # the line's position in each chunk: the mean of its steps there (its cut where it has none)
+                lo, hi = (r.lo if r.lo is not None else r.cut), (r.hi if r.hi is not None else r.cut)
+                m = mask[lo:hi + 1]
+                cnt = m.sum(axis=0)
+                pos = np.where(cnt > 0, (m * np.arange(lo, hi + 1)[:, None]).sum(axis=0) / np.maximum(cnt, 1), r.cut)
+                centre = n0 + pos * px
+                z_hi = float(np.median(lower[lo:hi + 1][m])) - ceil_band  # under the lower ceiling
+                if p.both_halves:  # points at all heights, not furniture only: in each half of the band
+                    mid = 0.5 * (z_lo + z_hi)
+                    low_half, high_half = pz < mid, (pz >= mid) & (pz < z_hi)
+                    held = (partition_support(normal[low_half], along[low_half], a0, cb, centre, tol)
+                            & partition_support(normal[high_half], along[high_half], a0, cb, centre, tol))
+                else:
+                    sel = pz < z_hi
+                    held = partition_support(normal[sel], along[sel], a0, cb, centre, tol)
+                # a run's end chunks are left out: the walls it meets stand there under a soffit's edge too
+                runs = tuple((a0 + a * cb, a0 + b * cb) for a, b in r.runs
+                             if b - a > 2 and held[a + 1:b - 1].mean() >= p.min_partition)
+                if not runs:
+                    continue
+                line = dataclasses.replace(line, runs=runs)
+            out.append(line)
+    return out

@@ -1,0 +1,37 @@
+"""Footprint polygons of spaces: the union of their cells' aligned boxes, turned into world coordinates."""
+from __future__ import annotations
+
+from typing import Any
+
+import shapely
+from shapely import affinity
+from shapely.geometry import box, mapping
+
+from engine.spaces.alignment import Frame
+
+
+def union_footprint(rects: list[list[float]], frame: Frame) -> tuple[dict[str, Any], float]:
+    """GeoJSON geometry (world x, y) of the union of aligned boxes ``[u0, v0, u1, v1]``, and its area in m².
+
+    The cells of a space tile the plane without overlap and share exact edges,
+    so the union is a clean polygon (with holes where a space surrounds another).
+    """
+    if not rects:
+        return {"type": "Polygon", "coordinates": []}, 0.0
+    geom = shapely.union_all([box(*r) for r in rects])
+    area = float(geom.area)
+    c, s = frame.cos_sin
+    world = affinity.affine_transform(geom, [c, -s, s, c, frame.origin[0], frame.origin[1]])
+    world = shapely.set_precision(world, 1e-4)
+    return mapping(world), area
+
+
+def union_geojson(geoms: list[dict[str, Any]]) -> tuple[dict[str, Any], float]:
+    """GeoJSON union of GeoJSON geometries (world x, y) and its area in m² (spaces joined after refinement)."""
+    from shapely.geometry import shape
+
+    shapes = [shape(g) for g in geoms if g.get("coordinates")]
+    if not shapes:
+        return {"type": "Polygon", "coordinates": []}, 0.0
+    world = shapely.set_precision(shapely.union_all(shapes), 1e-4)
+    return mapping(world), float(world.area)

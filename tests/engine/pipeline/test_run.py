@@ -1,0 +1,279 @@
+"""The whole run on a small generated building: outputs, ground-truth scores, reruns, failures."""
+from __future__ import annotations
+
+import json
+import os
+
+import laspy
+import numpy as np
+import pytest
+
+from engine.pipeline import run as pipeline
+from engine.cli import main
+from engine.detection.model import Model
+from engine.pipeline.run import RunSettings, run
+from engine.pipeline.stages import StageLog
+from engine.synth import generate
+from tiles.store import open_store
+from tiles.tasks import TaskFailures
+
+OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "elements.json", "metrics.json", "report.html")
+
+
+@pytest.fixture(scope="module")
+def building(tmp_path_factory, structural_model):
+    """A small LAZ building with ground truth (gt.json beside it), and a structural model trained on another."""
+    root = tmp_path_factory.mktemp("pipe")
+    laz = root / "building.laz"
+    generate(str(laz), seed=21, rooms=4, density=1500, yaw=17.0, format="laz")
+    return root, laz, structural_model
+
+
+@pytest.fixture(scope="module")
+def first_run(building, client):
+    root, laz, model = building
+    out = root / "out"
+    lines = []
+    metrics = run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lines.append))
+    return out, metrics, lines
+
+
+def _laz_dims(path, *names):
+    with laspy.open(path) as f:
+        las = f.read()
+    return {n: np.asarray(las[n]) for n in names}
+
+
+def test_run_writes_every_output_and_keeps_every_point_in_order(building, first_run):
+    _, laz, _ = building
+    out, metrics, _ = first_run
+    for name in OUTPUTS:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    src = _laz_dims(laz, "X", "Y", "Z", "red", "gt_space")
+    res = _laz_dims(out / "points.laz", "X", "Y", "Z", "red", "gt_space", "classification", "space_id",
+                    "element_id")
+    for n in ("X", "Y", "Z", "red", "gt_space"):
+        np.testing.assert_array_equal(src[n], res[n], err_msg=n)
+    assert metrics["input"]["points"] == len(src["X"])
+    # every point inside a space has a space id; labelled points carry the id of an element of elements.json
+    assert np.mean(res["space_id"] >= 0) > 0.95
+    elements = json.loads((out / "elements.json").read_text())
+    records = elements["elements"] if isinstance(elements, dict) else elements
+    ids = {int(e["element_id"]) for e in records}
+    labelled = res["element_id"] >= 0
+    assert labelled.any() and set(np.unique(res["element_id"][labelled]).tolist()) <= ids
+
+
+def test_metrics_score_the_ground_truth_and_match_the_report(first_run):
+    out, metrics, _ = first_run
+    def strict(c):
+        raise AssertionError(f"{c} in an output file: not JSON")
+
+    disk = json.loads((out / "metrics.json").read_text(), parse_constant=strict)
+    json.loads((out / "spaces.geojson").read_text(), parse_constant=strict)
+    assert disk["spaces"]["count"] == metrics["spaces"]["count"]
+    s = metrics["spaces"]
+    assert s["ari"] > 0.8 and s["ari"] >= s["ari_oversegmented"]
+    det = metrics["detection"]
+    assert det["ap"]["floor"] > 0.3 and det["ap"]["wall"] > 0.1
+    features = json.loads((out / "spaces.geojson").read_text())["features"]
+    assert len(features) == s["count"]
+    html = (out / "report.html").read_text()
+    assert f"{s['ari']:.3f}" in html or f"{s['ari']:.2f}" in html
+    assert "floorplan" in html.lower() or "data:image/png" in html
+    for stage in ("ingest", "spaces", "detection", "labels"):
+        assert stage in metrics["timings"]
+
+
+def test_summary_names_the_results(first_run):
+    out, metrics, lines = first_run
+    text = "\n".join(pipeline.summary_lines(metrics, str(out)))
+    assert "ARI" in text and "mAP" in text and str(out / "report.html") in text
+    assert any("spaces:" in ln for ln in lines)  # progress of the stages was said
+
+
+def test_rerun_skips_finished_stages_and_gives_the_same_outputs(building, first_run, client):
+    root, laz, model = building
+    out, metrics, _ = first_run
+    before = {n: (out / n).read_bytes() for n in ("elements.json", "spaces.geojson")}
+    again = run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+    assert {"ingest", "spaces", "detection", "crf", "space_update", "labels", "export"} <= set(again["skipped"])
+    assert again["spaces"] == metrics["spaces"] and again["detection"]["ap"] == metrics["detection"]["ap"]
+    for n, b in before.items():
+        assert (out / n).read_bytes() == b, n
+
+
+def test_forced_run_is_deterministic(building, first_run, client, tmp_path):
+    _, laz, model = building
+    out, metrics, _ = first_run
+    other = tmp_path / "again"
+    again = run(str(laz), str(other), client=client,
+                options=RunSettings(model=model, force=True, say=lambda s: None, export_points=False))
+    assert again["skipped"] == []
+    assert again["spaces"] == metrics["spaces"]
+    assert again["detection"]["ap"] == metrics["detection"]["ap"]
+    assert (other / "elements.json").read_bytes() == (out / "elements.json").read_bytes()
+
+
+def test_a_failing_space_is_reported_recorded_and_leaves_no_report(building, monkeypatch, tmp_path):
+    _, laz, model = building
+    import engine.detection.detect as det
+
+    real = det._detect_task
+
+    def flaky(job, *args, **kw):
+        ref = job[0]
+        if ref.space_id == 1:
+            raise RuntimeError("simulated worker fault")
+        return real(job, *args, **kw)
+
+    monkeypatch.setattr(det, "_detect_task", flaky)
+    out = tmp_path / "failed"
+    with pytest.raises(TaskFailures) as err:
+        run(str(laz), str(out), options=RunSettings(model=model, say=lambda s: None))
+    assert "simulated worker fault" in str(err.value)
+    assert not (out / "report.html").exists() and not (out / "metrics.json").exists()
+    log = StageLog(open_store(str(out / "store.zarr")))
+    rec = log.get("detection")
+    assert rec.status == "failed" and any("simulated worker fault" in e for e in rec.failed.values())
+    assert log.get("spaces").status == "ok"  # finished stages are kept for the next run
+    # the next run redoes the failed stage (and only what depends on it)
+    monkeypatch.setattr(det, "_detect_task", real)
+    metrics = run(str(laz), str(out), options=RunSettings(model=model, say=lambda s: None, export_points=False))
+    assert "spaces" in metrics["skipped"] and "detection" not in metrics["skipped"]
+    assert (out / "report.html").is_file()
+    # a later run that fails withdraws the earlier report: the folder no longer looks complete
+    monkeypatch.setattr(det, "_detect_task", flaky)
+    with pytest.raises(TaskFailures):
+        run(str(laz), str(out), options=RunSettings(model=model, say=lambda s: None, force=True))
+    assert not (out / "report.html").exists()
+
+
+def test_export_runs_beside_the_metrics_and_its_failure_is_the_runs(building, client, monkeypatch, tmp_path):
+    """points.laz is written in a thread while the metrics run; a failed export fails the run, recorded, with no
+    report, and a failure of the metrics is the one raised even when the export fails too."""
+    _, laz, model = building
+    import engine.pipeline.run as pl
+    import tiles.export as ex
+
+    threads = {}
+    real_export, real_metrics = ex.export, pl._metrics
+
+    def broken_export(*a, **kw):
+        import threading
+
+        threads["export"] = threading.current_thread().name
+        raise TaskFailures("writing points", [("unit 0", OSError("simulated disk full"))])
+
+    def metrics_here(*a, **kw):
+        import threading
+
+        threads["metrics"] = threading.current_thread().name
+        return real_metrics(*a, **kw)
+
+    monkeypatch.setattr(ex, "export", broken_export)
+    monkeypatch.setattr(pl, "_metrics", metrics_here)
+    out = tmp_path / "export-fails"
+    with pytest.raises(TaskFailures, match="simulated disk full"):
+        run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+    assert threads["export"].startswith("buildingparser-export") and threads["metrics"] != threads["export"]
+    assert not (out / "report.html").exists() and not (out / "points.laz").exists()
+    log = StageLog(open_store(str(out / "store.zarr")))
+    assert log.get("export").status == "failed" and log.get("labels").status == "ok"
+
+    def broken_metrics(*a, **kw):
+        raise ValueError("simulated metrics bug")
+
+    monkeypatch.setattr(pl, "_metrics", broken_metrics)
+    with pytest.raises(ValueError, match="simulated metrics bug"):
+        run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+    assert not (out / "report.html").exists()
+    monkeypatch.setattr(ex, "export", real_export)
+    monkeypatch.setattr(pl, "_metrics", real_metrics)
+    metrics = run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+    assert "export" not in metrics["skipped"] and metrics["timings"]["export"] > 0
+    assert (out / "points.laz").is_file() and (out / "report.html").is_file()
+
+
+def test_cli_run_and_its_errors(building, client, tmp_path, capsys):
+    _, laz, model = building
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(b"not a point cloud at all")
+    out = tmp_path / "bad-out"
+    rc = main(["run", str(bad), "--out", str(out), "--model", model, "--scheduler", client.scheduler.address])
+    err = capsys.readouterr().err
+    assert rc == 2 and "bad.laz" in err and "Traceback" not in err
+    assert not (out / "report.html").exists()
+    rc = main(["run", str(laz), "--out", str(tmp_path / "x"), "--model", str(tmp_path / "nope"),
+               "--scheduler", client.scheduler.address])
+    err = capsys.readouterr().err
+    assert rc == 2 and "nope" in err and "Traceback" not in err
+    assert Model.load(model) is not None
+    assert os.path.isfile(model + ".npz")
+
+
+def test_killing_a_worker_mid_run_changes_nothing(building, first_run, tmp_path):
+    """A 2-worker cluster loses a worker process during detection; the run completes with identical output."""
+    import logging
+    import signal
+    import threading
+    import time
+
+    from distributed import Client, LocalCluster
+
+    _, laz, model = building
+    out, metrics, _ = first_run
+    killed: list[str] = []
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                      silence_logs=logging.CRITICAL, memory_limit="4GiB") as cluster, Client(cluster) as cl:
+        pids = cl.run(os.getpid)
+        done = threading.Event()
+
+        def assassin():
+            while not done.is_set() and not killed:
+                for worker, keys in cl.processing().items():
+                    if any(str(k).startswith(("_detect_task", "_label_tile")) for k in keys):
+                        os.kill(pids[worker], signal.SIGKILL)
+                        killed.append(str(next(iter(keys))))
+                        return
+                time.sleep(0.02)
+
+        watcher = threading.Thread(target=assassin, daemon=True)
+        watcher.start()
+        try:
+            again = run(str(laz), str(tmp_path / "killed"), client=cl,
+                        options=RunSettings(model=model, say=lambda s: None))
+        finally:
+            done.set()
+            watcher.join()
+    assert killed, "the worker was never killed: the run ended before detection was seen"
+    assert again["spaces"] == metrics["spaces"] and again["detection"]["ap"] == metrics["detection"]["ap"]
+    for n in ("elements.json", "spaces.geojson"):
+        assert (tmp_path / "killed" / n).read_bytes() == (out / n).read_bytes(), n
+    a = _laz_dims(out / "points.laz", "classification", "space_id", "element_id")
+    b = _laz_dims(tmp_path / "killed" / "points.laz", "classification", "space_id", "element_id")
+    for n in a:
+        np.testing.assert_array_equal(a[n], b[n], err_msg=n)
+
+
+def test_run_with_crf_weights_keeps_a_subset_and_scores_the_ranking(building, client, tmp_path):
+    """The default path: a model with CRF weights; the CRF keeps a subset and its ranking is scored too."""
+    import shutil
+
+    _, laz, model = building
+    crf_model = str(tmp_path / "crf-model")
+    for ext in (".npz", ".json"):
+        shutil.copy(model + ext, crf_model + ext)
+    rc = main(["train-crf", crf_model, "--synthetic", "1", "--seed", "9100", "--area", "60", "--density", "1200",
+               "--scheduler", client.scheduler.address])
+    assert rc == 0
+    out = tmp_path / "out"
+    metrics = run(str(laz), str(out), client=client,
+                  options=RunSettings(model=crf_model, say=lambda s: None, export_points=False))
+    det, crf = metrics["detection"], metrics["crf"]
+    assert crf["spaces"] >= 1 and sum(crf["status"].values()) == crf["spaces"]
+    assert crf["kept"] <= crf["proposals"] and sum(metrics["elements"].values()) == crf["kept"]
+    assert det["map_crf_ranked"] is not None and 0.0 <= det["map_crf_ranked"] <= 1.0
+    assert not (out / "points.laz").exists()
+    text = "\n".join(pipeline.summary_lines(metrics, str(out)))
+    assert "contextual score" in text and "points.laz" not in text
