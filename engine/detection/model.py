@@ -245,7 +245,7 @@ def _json_default(o: Any) -> Any:
 
 def default_model_path() -> str:
     """The model shipped with the package (``engine/models/default``)."""
-    return os.path.join(os.path.dirname(__file__), "models", "default")
+    return os.path.join(os.path.dirname(os.path.dirname(__file__)), "models", "default")
 
 
 def load_model(path: str | os.PathLike | None = None) -> Model:
