@@ -71,7 +71,7 @@ def _cluster(n: int):
 
 
 def _warm_up() -> None:
-    import engine.crf.model  # noqa: F401
+    import engine.crf.apply  # noqa: F401
     from ortools.sat.python import cp_model  # noqa: F401
 
 
@@ -81,7 +81,7 @@ def _flat(groups):
 
 def _set_quality(groups, gt_groups, keep) -> dict[str, float]:
     """Precision and recall of a set of proposals (VOC matching within the set, space by space)."""
-    from engine.crf.ssvm import proposal_labels
+    from engine.crf.labels import proposal_labels
 
     tp = n = 0
     for props, gts in zip(groups, gt_groups):
@@ -95,7 +95,7 @@ def _set_quality(groups, gt_groups, keep) -> dict[str, float]:
 
 def compare(groups, gt_groups, weights, *, client=None, settings=None, label="") -> tuple[dict[str, Any], list]:
     """The CRF against the detector alone on the same spaces: ranked lists and final sets."""
-    from engine.crf.model import apply_crf, rescored
+    from engine.crf.apply import apply_crf, rescored
     from engine.metrics.detection import evaluate_detections
 
     flat, gts = _flat(groups), _flat(gt_groups)
@@ -133,7 +133,10 @@ def compare(groups, gt_groups, weights, *, client=None, settings=None, label="")
 
 def scenes_part(quick: bool) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Learn on training scenes, measure on held-apart scenes."""
-    from engine.crf.model import CRFSettings, apply_crf, build_graph, energies, solve_ip
+    from engine.crf.apply import apply_crf
+    from engine.crf.graph import build_graph, energies
+    from engine.crf.model import CRFSettings
+    from engine.crf.solve import solve_ip
     from engine.crf.scenes import make_scenes
     from engine.crf.ssvm import train_crf
 
@@ -204,14 +207,16 @@ SEEDS = {"detector": [2000, 2001, 2002], "crf": [2003, 2004, 2005], "test": [200
 def buildings_part(workdir: str, seeds: dict[str, list[int]] | None = None,
                    area: float = 150.0) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Generated buildings (``seeds`` per role, ``area`` m² each): detector, CRF and test buildings kept apart."""
-    from engine.crf.model import apply_crf
+    from engine.crf.apply import apply_crf
     from engine.detection.detect import detect
     from engine.metrics.ari import distributed_ari
     from engine.spaces.update import update_spaces
     from engine.spaces.parse import parse_spaces
-    from engine.crf.ssvm import group_by_space, train_crf
+    from engine.crf.labels import group_by_space
+    from engine.crf.ssvm import train_crf
     from engine.synth import generate
-    from engine.training.train import synthetic_yaw, train
+    from engine.training.synthetic import synthetic_yaw
+    from engine.training.train import train
     from tiles.store import open_store
 
     seeds = seeds or SEEDS

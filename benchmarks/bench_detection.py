@@ -119,7 +119,7 @@ def _store(seed: int, gen_kw: dict[str, Any], client) -> Any:
     """The generated building ``seed`` (cached in ``$BUILDINGPARSER_BENCH_CACHE``, keyed by its parameters)."""
     from benchmarks.bench_spaces import _generator_version, cache_dir
     from engine.synth import generate
-    from engine.training.train import synthetic_yaw
+    from engine.training.synthetic import synthetic_yaw
     from tiles.store import open_store
 
     yaw = synthetic_yaw(seed)
@@ -136,7 +136,9 @@ def run(quick: bool = False) -> dict[str, Any]:
     from engine.detection.features import ABLATIONS
     from engine.outputs.labels import label_points
     from engine.metrics.detection import PointEvaluation, evaluate_points, format_ap_table
-    from engine.training.train import TrainSettings, refit_without, train_with_samples
+    from engine.training.settings import TrainSettings
+    from engine.training.svm import refit_without
+    from engine.training.train import train_with_samples
     from tiles.classes import ELEMENT_CLASSES
 
     # full mode: the shipped model's training ('make model') and held-out buildings (benchmarks.shipped_model)

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import logging
 import os
@@ -187,6 +188,24 @@ def stage_profile(stream: list[dict[str, Any]], marks: list[tuple[float, str, fl
     return rows
 
 
+@contextlib.contextmanager
+def _stage_lines(say):
+    """``say(line)`` for every message the pipeline logs (its line per stage) in the block."""
+    class Said(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            say(record.getMessage())
+
+    log, handler = logging.getLogger("engine.pipeline.run"), Said(logging.INFO)
+    level = log.level
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
+
+
 def measure(source: str, out: str, workers: int, model: str | None, *, verbose: bool = False) -> dict[str, Any]:
     """One forced run on a fresh LocalCluster of ``workers`` single-threaded workers."""
     from distributed import Client, LocalCluster, get_task_stream
@@ -212,7 +231,8 @@ def measure(source: str, out: str, workers: int, model: str | None, *, verbose: 
             with MemoryTrace() as mem, get_task_stream(client) as ts:
                 start = (time.time(), *_cpu_by_process(worker_pids))
                 t0 = time.perf_counter()
-                metrics = run(source, out, client=client, options=RunSettings(model=model, force=True, say=say))
+                with _stage_lines(say):
+                    metrics = run(source, out, client=client, options=RunSettings(model=model, force=True))
                 total = time.perf_counter() - t0
                 marks.append((time.time(), "end", *_cpu_by_process(worker_pids)))
             stream = ts.data

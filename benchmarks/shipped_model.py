@@ -28,12 +28,13 @@ def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list
     """Per-class AP (fractions) of the four rankings, keyed by their names, plus ``seconds``."""
     from distributed import Client, LocalCluster
 
-    from engine.crf.model import CRFWeights, apply_crf, rescored
+    from engine.crf.apply import apply_crf, rescored
+    from engine.crf.model import CRFWeights
     from engine.detection.detect import detect
     from engine.metrics.detection import evaluate_detections
     from engine.detection.model import load_model
     from engine.synth import generate
-    from engine.training.train import synthetic_yaw
+    from engine.training.synthetic import synthetic_yaw
     from tiles.store import open_store
 
     model = load_model(model_path)

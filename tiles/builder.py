@@ -1,69 +1,36 @@
 """Building a tile store from parts, with every Zarr chunk written by exactly one task.
 
-Points arrive in *parts* (a range of an input file, a room of a generated
-building), each read by one task, and each part touches many tiles.  Writing
-them straight into the tiles would have several tasks write the same Zarr
-chunk, which silently loses data.  So building is a two-step external shuffle:
-
-1. :meth:`StoreBuilder.write_part` (one task per part) sorts the part's points
-   by tile, stably, and writes them to one file ``_staging/p<k>.bin`` in the
-   store being built, tile run after tile run: each run holds every staged
-   dimension of its points, each compressed on its own (Blosc LZ4, byte
-   shuffle; ``point_index`` as the steps between the run's increasing
-   positions).  Dimensions constant over the part are not staged.  It
-   returns a :class:`PartSummary` (where each tile's run lies in the file, its
-   raw bounds, the constants).
-2. :meth:`StoreBuilder.finalize` runs one task per tile that reads that tile's
-   run from every part (one byte range per part), in part order, decodes it
-   straight into the tile's arrays and writes them whole.  Then it writes the
-   metadata document (``complete: true`` last), deletes the staging area and
-   renames the build into place.
-
-A store is built under a hidden temporary name next to its target and renamed
-at the end, so a failed build never leaves something that looks complete; on
-object stores (no rename) the ``complete`` flag written last plays that role.
+A two-step external shuffle: :meth:`StoreBuilder.write_part` (one task per
+part) stages the part's points sorted by tile (:mod:`tiles.staging`);
+:meth:`StoreBuilder.finalize` runs one task per tile that reads the tile's run
+from every part and writes the tile's arrays whole, then publishes the store
+(built under a hidden temporary name, ``complete: true`` written last).  The
+whole story: docs/design/tiles.md, "Building a store".
 """
 from __future__ import annotations
 
-import functools
 import math
 import warnings
 from collections import defaultdict
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-import dask
-import numcodecs
 import numpy as np
-import zarr
 
-from tiles import paths, scratch, zarrio
+from tiles import paths, zarrio
+from tiles.config import setting
 from tiles.errors import UserError
 from tiles.schema import (META_KEY, POINT_INDEX, SCHEMA_VERSION, Dimension, Part, Source, StoreMeta,
-                          TileInfo)
-from tiles.store import TileStore, _open_group, tile_name, utc_now, write_doc
+                          TileInfo, software_name)
+from tiles.staging import pieces, read_staging, split_bytes, staging_codec, write_staging
+from tiles.store import TileStore, tile_name, utc_now, write_doc
 from tiles.tasks import run_tasks
+from tiles.tiling import TileGrid, TileOrder
 
 
 def default_tile_size() -> float:
     """Tile edge in metres, from ``dask.config`` ``buildingparser.tiles.size``."""
-    return float(dask.config.get("buildingparser.tiles.size", 10.0))
-
-
-#: The staging codec: LZ4 with byte shuffle, level 5.  On the runs of bench_ingest's cloud (2 M points, 10 staged
-#: dimensions) it keeps 59 % of the bytes for 21 ms to encode and 10 ms to decode them: cheaper than writing and
-#: reading the other 41 % (on a 2-core VM whose new memory costs ~2 s/GB to touch, page cache included), half the
-#: scratch space, and far fewer bytes and requests when the store is on an object store.  Level 1 took 44 ms for the
-#: same size, bit shuffle 44 ms for 83 %.
-STAGING_CODEC = {"cname": "lz4", "clevel": 5, "shuffle": numcodecs.Blosc.SHUFFLE}
-#: Largest piece of a run's dimension compressed at once (Blosc takes at most 2 GB; bigger runs are cut).
-STAGING_PIECE = 1 << 26
-
-
-@functools.lru_cache(maxsize=None)
-def _staging_codec() -> numcodecs.Blosc:
-    return numcodecs.Blosc(blocksize=0, **STAGING_CODEC)
+    return setting("tiles.size")
 
 
 @dataclass
@@ -74,27 +41,14 @@ class PartSummary:
     count: int
     #: (ix, iy) -> (count, raw_min[3], raw_max[3], byte offset in the staging file, compressed piece sizes) of the
     #: part's run for that tile; the pieces are the staged dimensions in :meth:`StoreBuilder.staging_layout` order,
-    #: each cut in pieces of at most :data:`STAGING_PIECE` bytes
+    #: each cut in pieces of at most :data:`tiles.staging.STAGING_PIECE` bytes
     tiles: dict[tuple[int, int], tuple[int, list[int], list[int], int, list[int]]] = field(default_factory=dict)
     color_max: int | None = None
     #: dimensions whose every value in the part has the same bits (not staged): name -> the bits as an integer
     constants: dict[str, Any] = field(default_factory=dict)
 
 
-@dataclass
-class TileOrder:
-    """The stable order of a part's points by tile (:meth:`StoreBuilder.tile_order`)."""
-
-    #: positions in the part, tile run after tile run
-    order: np.ndarray
-    #: per tile run: first position in ``order``, point count, tile indices
-    starts: np.ndarray
-    counts: np.ndarray
-    ix: np.ndarray
-    iy: np.ndarray
-
-
-class StoreBuilder:
+class StoreBuilder(TileGrid):
     """Writes a new tile store; send it to workers as a task argument (it pickles small).
 
     Use :meth:`create`, then :meth:`write_part` once per part (any order, any
@@ -146,7 +100,7 @@ class StoreBuilder:
         build_url = paths.temporary_sibling(url)
         dims = [d for d in dimensions if d.name != POINT_INDEX.name]
         dims.insert(3 if len(dims) >= 3 else len(dims), POINT_INDEX)
-        root = _open_group(build_url, storage_options, mode="w")
+        root = zarrio.open_group(build_url, storage_options, mode="w")
         root.attrs[META_KEY] = {"schema_version": SCHEMA_VERSION, "complete": False}
         root.require_group("_staging")
         root.require_group("tiles")
@@ -179,77 +133,6 @@ class StoreBuilder:
         """The per-point arrays a part must provide (all but ``point_index``)."""
         return [d.name for d in self.dimensions if d.name != POINT_INDEX.name]
 
-    def tile_keys(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Tile indices of raw scaled-integer coordinates: ``floor((raw * scale + offset) / tile_size)``
-        in float64 (the definition; :meth:`local_tile_index` computes the same faster)."""
-        out = []
-        for v, i in ((x, 0), (y, 1)):
-            w = np.multiply(v, self.scale[i], dtype=np.float64)
-            w += self.offset[i]
-            w /= self.tile_size
-            out.append(np.floor(w, out=w).astype(np.int64))
-        return out[0], out[1]
-
-    def _tile_of(self, raw: int, axis: int) -> int:
-        """:meth:`tile_keys` of one raw integer (the same float64 operations, in Python floats)."""
-        return math.floor((float(raw) * self.scale[axis] + self.offset[axis]) / self.tile_size)
-
-    def local_tile_index(self, v: np.ndarray, axis: int) -> tuple[np.ndarray, int, int]:
-        """The tile index along ``axis`` of every raw coordinate ``v``, as :meth:`tile_keys` gives it, but
-        relative to the first tile: ``(index - first, first, count of tiles spanned)``.
-
-        Computed from the exact thresholds (the smallest raw value of each tile
-        after the first, found with the float formula, which is monotonic), so
-        that the per-point work is integer: one ``floor_divide`` when the
-        thresholds are evenly spaced (a tile is a whole number of raw steps),
-        else a ``searchsorted``.
-        """
-        lo, hi = int(v.min()), int(v.max())
-        first, last = self._tile_of(lo, axis), self._tile_of(hi, axis)
-        m = last - first
-        if m == 0:
-            return np.zeros(len(v), dtype=np.uint16), first, 1
-        if m >= 1 << 12:  # a part spanning thousands of tiles: the formula itself
-            w = np.multiply(v, self.scale[axis], dtype=np.float64)
-            w += self.offset[axis]
-            w /= self.tile_size
-            return (np.floor(w, out=w) - first).astype(np.int64), first, m + 1
-        step = self.tile_size / self.scale[axis]
-        thresholds = []
-        for k in range(first + 1, last + 1):
-            r = max(lo, min(hi, math.ceil((k * self.tile_size - self.offset[axis]) / self.scale[axis])))
-            while r > lo and self._tile_of(r - 1, axis) >= k:
-                r -= 1
-            while self._tile_of(r, axis) < k:
-                r += 1
-            thresholds.append(r)
-        t = np.asarray(thresholds, dtype=np.int64)
-        q = int(t[1] - t[0]) if m > 1 else max(int(round(step)), 1)
-        t0 = int(t[0])
-        if (hi - lo < 1 << 30 and q > 0 and np.all(t == t0 + q * np.arange(m))
-                and t0 - q <= lo and hi < t0 + q * m):
-            idx = np.subtract(v, t0, dtype=np.int32) if v.dtype.itemsize <= 4 else v.astype(np.int64) - t0
-            idx //= q
-            idx += 1
-            return idx.astype(np.uint16), first, m + 1
-        return np.searchsorted(t, v, side="right").astype(np.uint16), first, m + 1
-
-    def tile_order(self, x: np.ndarray, y: np.ndarray) -> TileOrder:
-        """The stable order of points by tile, from their raw x and y (see :class:`TileOrder`)."""
-        kx, x0, nx = self.local_tile_index(x, 0)
-        ky, y0, ny = self.local_tile_index(y, 1)
-        if nx * ny <= 1 << 16:
-            key = kx.astype(np.uint16)
-            key *= np.uint16(ny)  # < nx * ny: no overflow
-            key += ky.astype(np.uint16, copy=False)
-        else:
-            key = kx.astype(np.int64) * ny + ky
-        # numpy's stable sort of 16-bit keys is a radix sort: O(n) for parts spanning < 65536 tiles
-        order = np.argsort(key, kind="stable")
-        per_key = np.bincount(key, minlength=nx * ny)
-        used = np.flatnonzero(per_key)
-        counts = per_key[used]
-        return TileOrder(order, np.cumsum(per_key)[used] - counts, counts, x0 + used // ny, y0 + used % ny)
 
     def write_part(self, part_id: int, columns: dict[str, np.ndarray],
                    order: TileOrder | None = None) -> PartSummary:
@@ -300,19 +183,19 @@ class StoreBuilder:
         values[POINT_INDEX.name] = steps
         mins = {a: np.minimum.reduceat(values[a], starts) for a in "xyz"}
         maxs = {a: np.maximum.reduceat(values[a], starts) for a in "xyz"}
-        codec = _staging_codec()
+        codec = staging_codec()
         blobs: list[Any] = []
         offset = 0
         for j, (start, count) in enumerate(zip(starts.tolist(), order.counts.tolist())):
             sizes = []
             for name, _ in layout:
-                for piece in _pieces(values[name][start:start + count]):
+                for piece in pieces(values[name][start:start + count]):
                     blobs.append(codec.encode(piece))
                     sizes.append(len(blobs[-1]))
             summary.tiles[(int(order.ix[j]), int(order.iy[j]))] = (
                 int(count), [int(mins[a][j]) for a in "xyz"], [int(maxs[a][j]) for a in "xyz"], offset, sizes)
             offset += sum(sizes)
-        _write_staging(self, part_id, blobs)
+        write_staging(self.build_url, part_id, blobs, self.storage_options)
         rgb = [c for c in ("red", "green", "blue") if c in columns]
         if rgb:
             summary.color_max = max(summary.constants[c] if c in summary.constants else int(np.max(values[c]))
@@ -368,8 +251,8 @@ class StoreBuilder:
                          tile_size=self.tile_size, tiles=tiles, parts=parts, sources=sources,
                          dimensions=self.dimensions, crs=crs,
                          color_depth=(None if not cmax else (8 if max(cmax) <= 255 else 16)),
-                         las=las, created=utc_now(), software=_software(), complete=False)
-        root = _open_group(self.build_url, self.storage_options, mode="r+")
+                         las=las, created=utc_now(), software=software_name(), complete=False)
+        root = zarrio.open_group(self.build_url, self.storage_options, mode="r+")
         for name, doc in (docs or {}).items():
             write_doc(root, name, doc)
         paths.remove(paths.join(self.build_url, "_staging"), self.storage_options)
@@ -403,15 +286,15 @@ def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int, list[int]]
     offsets = np.cumsum(offsets)
     n = int(offsets[-1])
     out = {d.name: np.empty(n, dtype=d.dtype) for d in builder.dimensions}
-    codec = _staging_codec()
+    codec = staging_codec()
     pos = 0
-    for (part_id, count, _, sizes), data in zip(runs, _read_staging(builder, runs)):
+    for (part_id, count, _, sizes), data in zip(runs, read_staging(builder.build_url, runs, builder.storage_options)):
         size, constants = layouts[part_id]
-        blobs = iter(_split_bytes(data, sizes))
+        blobs = iter(split_bytes(data, sizes))
         for name, dt in builder.staging_layout(size, constants):
             dst = out[name][pos:pos + count]
             got = dst if dst.dtype == dt and name != POINT_INDEX.name else np.empty(count, dtype=dt)
-            for piece in _pieces(got):
+            for piece in pieces(got):
                 codec.decode(next(blobs), out=piece)
             if name == POINT_INDEX.name:
                 np.cumsum(got, dtype=dst.dtype, out=dst)
@@ -423,87 +306,14 @@ def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int, list[int]]
             dst.view(f"u{dst.dtype.itemsize}")[:] = bits
         pos += count
     tile_url = paths.join(builder.build_url, "tiles", tile_name(*key))
-    _open_group(tile_url, builder.storage_options, mode="w")
+    zarrio.open_group(tile_url, builder.storage_options, mode="w")
     for d in builder.dimensions:
         zarrio.write_array(tile_url, d.name, out.pop(d.name), builder.storage_options)
     zarrio.write_array(tile_url, "part_offsets", offsets, builder.storage_options)
     return n
 
 
-def _pieces(a: np.ndarray) -> list[np.ndarray]:
-    """``a`` (1-D, contiguous) cut in consecutive pieces of at most :data:`STAGING_PIECE` bytes."""
-    step = max(STAGING_PIECE // a.itemsize, 1)
-    return [a[k:k + step] for k in range(0, len(a), step)] or [a]
-
-
-def _split_bytes(data, sizes: list[int]) -> list[memoryview]:
-    """``data`` cut in consecutive pieces of ``sizes`` bytes."""
-    view, out, at = memoryview(data), [], 0
-    for size in sizes:
-        out.append(view[at:at + size])
-        at += size
-    if at != len(view):
-        raise RuntimeError(f"staged run of {len(view)} bytes, expected {at}")
-    return out
-
-
-def _staging_url(builder: StoreBuilder, part_id: int) -> str:
-    url = paths.join(builder.build_url, "_staging", f"p{part_id:07d}.bin")
-    return paths.local_path(url) if paths.is_local(url) else url
-
-
-def _write_staging(builder: StoreBuilder, part_id: int, blobs: list[Any]) -> None:
-    """Write a part's compressed runs one after another as one file (private to the build, removed by
-    :meth:`finalize`)."""
-    url = _staging_url(builder, part_id)
-    if paths.is_local(url):
-        with open(url, "wb") as f:
-            for b in blobs:
-                f.write(b)
-    else:
-        fs, p = paths.filesystem(url, builder.storage_options)
-        fs.pipe_file(p, b"".join(blobs))
-
-
-def _read_staging(builder: StoreBuilder, runs: list[tuple[int, int, int, list[int]]]) -> Iterator[Any]:
-    """The bytes of each run ``(part_id, count, offset, sizes)``, one range of its part's staging file, in order.
-
-    Local files are read one run at a time into one reused buffer (use each
-    before asking for the next); on an object store all ranges are fetched at
-    once, concurrently.
-    """
-    ranges = [(_staging_url(builder, part_id), offset, sum(sizes)) for part_id, _, offset, sizes in runs]
-    if ranges and paths.is_local(ranges[0][0]):
-        for url, offset, size in ranges:
-            buf = scratch.buffer("staged run", size)
-            with open(url, "rb", buffering=0) as f:
-                f.seek(offset)
-                got = f.readinto(memoryview(buf)) if size else 0
-            if got != size:
-                raise RuntimeError(f"staging file {url} is short: {got} of {size} bytes at {offset}")
-            yield buf
-        return
-    if not ranges:
-        return
-    fs, _ = paths.filesystem(ranges[0][0], builder.storage_options)
-    located = [paths.filesystem(url, builder.storage_options)[1] for url, _, _ in ranges]
-    blobs = fs.cat_ranges(located, [o for _, o, _ in ranges], [o + s for _, o, s in ranges])
-    for (url, offset, size), data in zip(ranges, blobs):
-        if isinstance(data, Exception) or len(data) != size:
-            raise RuntimeError(f"staging file {url} is short at {offset}: {data!r:.80}")
-        yield data
-
-
 def _looks_like_store(url: str) -> bool:
     import os
 
     return os.path.isfile(os.path.join(paths.local_path(url), "zarr.json"))
-
-
-def _software() -> str:
-    try:
-        from importlib.metadata import version
-
-        return f"buildingparser {version('buildingparser')}"
-    except Exception:  # noqa: BLE001
-        return "buildingparser"

@@ -20,6 +20,16 @@ SCHEMA_VERSION = 2  # 2: meta documents as JSON byte arrays (tiles.store.write_d
 FORMAT_NAME = "buildingparser-tiles"
 META_KEY = "buildingparser"
 
+def software_name() -> str:
+    """``buildingparser <version>`` of the installed package (``buildingparser`` when it is not installed)."""
+    try:
+        from importlib.metadata import version
+
+        return f"buildingparser {version('buildingparser')}"
+    except Exception:  # noqa: BLE001
+        return "buildingparser"
+
+
 #: Kinds of per-point dimension.
 KINDS = ("coordinate", "index", "las", "extra", "ground_truth", "result")
 

@@ -20,25 +20,9 @@ import numpy as np
 import zarr
 import zarr.codecs
 
-from tiles import paths
+from tiles import paths, zarrio
 from tiles.errors import IncompleteStoreError, UserError
 from tiles.schema import META_KEY, SCHEMA_VERSION, Dimension, StoreMeta, TileInfo
-
-#: Points per Zarr chunk inside a tile's arrays.
-TILE_CHUNK = 1 << 20
-
-
-def tile_compressor() -> zarr.codecs.BloscCodec:
-    """The codec of the long-lived tile arrays: LZ4 with bit shuffle.
-
-    Measured on the store of bench_ingest's 20 M-point cloud (22 LAS
-    dimensions, 48 tiles): 343 MB and 0.50 s of CPU to encode against 305 MB
-    and 1.09 s for zstd level 1 with byte shuffle (the former codec), and
-    about half the CPU to decode: 12 % more disk for half the codec time of
-    every write and read.  Stores written with another Blosc codec are read as
-    they are (the codec is in each array's metadata).
-    """
-    return zarr.codecs.BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle")
 
 
 def tile_name(ix: int, iy: int) -> str:
@@ -84,7 +68,7 @@ class TileStore:
     @property
     def group(self) -> zarr.Group:
         if self._group is None:
-            self._group = _open_group(self.url, self.storage_options, mode="r+")
+            self._group = zarrio.open_group(self.url, self.storage_options, mode="r+")
         return self._group
 
     @property
@@ -146,8 +130,6 @@ class TileStore:
         expected = self.tile(tname).count
         if values.ndim != 1 or len(values) != expected:
             raise ValueError(f"{name} for tile {tname}: {values.shape} values for {expected} points")
-        from tiles import zarrio  # (imports this module)
-
         zarrio.write_array(paths.join(self.url, "tiles", tname), name, values, self.storage_options)
 
     def add_dimensions(self, dims: Sequence[Dimension]) -> None:
@@ -216,13 +198,6 @@ def read_doc(root: zarr.Group, name: str) -> dict[str, Any] | None:
     return json.loads(arr[...].tobytes())
 
 
-def _open_group(url: str, storage_options: dict[str, Any] | None, mode: str) -> zarr.Group:
-    kw: dict[str, Any] = {"mode": mode, "zarr_format": 3}
-    if paths.is_local(url):
-        return zarr.open_group(paths.local_path(url), **kw)
-    return zarr.open_group(url, storage_options=storage_options, **kw)
-
-
 def read_meta(url: str, storage_options: dict[str, Any] | None = None) -> StoreMeta:
     """Read and validate a store's metadata document, with clear errors."""
     url = paths.normalize(url)
@@ -231,7 +206,7 @@ def read_meta(url: str, storage_options: dict[str, Any] | None = None) -> StoreM
     if paths.is_local(url) and not __import__("os").path.isdir(paths.local_path(url)):
         raise UserError(url, "not a tile store (a file, expected a folder)")
     try:
-        g = _open_group(url, storage_options, mode="r")
+        g = zarrio.open_group(url, storage_options, mode="r")
     except Exception as exc:  # noqa: BLE001 - zarr raises several kinds
         raise UserError(url, f"not a tile store (no Zarr v3 group: {type(exc).__name__})") from None
     raw = dict(g.attrs).get(META_KEY)

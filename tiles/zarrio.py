@@ -1,24 +1,12 @@
-"""Writing a whole 1-D Zarr v3 tile array in one go, without zarr-python's per-array overhead.
+"""The tile arrays in Zarr v3: their codec and chunking, opening a group, writing a whole 1-D array in one go.
 
-zarr-python spends about 6 ms of CPU creating and filling one small array
-(metadata validation, its async codec pipeline, a thread hop per file), which
-for a store of hundreds of tiles times twenty dimensions is most of the tile
-build (see benchmarks/bench_ingest.py).  :func:`write_array` writes the same
-thing directly: the ``zarr.json`` that zarr-python itself makes for the dtype
-(built once per dtype by zarr and patched for shape and chunk shape), and each
-chunk encoded with the same Blosc settings (``numcodecs``), padded to the chunk
-shape, all-zero chunks left out as zarr does.  Chunk keys use the ``.``
-separator (``c.0``, a standard Zarr v3 chunk key encoding): the chunks sit
-beside ``zarr.json`` instead of in a ``c/`` folder of their own, one folder
-fewer per array (a 20 M-point store: 1,104 arrays, so 1,104 fewer directories to
-create; creating inodes is a good part of writing the tiles, see the
-README's Ingest figures).  The store is read by zarr as usual;
-``tests/tiles/test_zarrio.py`` checks that zarr reads back every value and that
-the metadata equals zarr's own.
+:func:`write_array` writes what zarr-python writes (its own ``zarr.json`` for the
+dtype, each chunk encoded with the same Blosc settings, all-zero chunks left
+out) without zarr-python's per-array overhead, with ``c.0`` chunk keys beside
+``zarr.json``.  Why, and what it saves: docs/design/tiles.md, "Writing tile arrays".
 """
 from __future__ import annotations
 
-import copy
 import functools
 import json
 import os
@@ -27,13 +15,31 @@ from typing import Any
 import numcodecs
 import numpy as np
 import zarr
+import zarr.codecs
 
 from tiles import paths
-from tiles.store import TILE_CHUNK, tile_compressor
 
-
+#: Points per Zarr chunk inside a tile's arrays.
+TILE_CHUNK = 1 << 20
 #: The tile arrays' chunk key encoding: ``c.0`` beside ``zarr.json`` (see the module doc).
 CHUNK_KEY_ENCODING = {"name": "default", "separator": "."}
+
+
+def tile_compressor() -> zarr.codecs.BloscCodec:
+    """The codec of the long-lived tile arrays: LZ4 with bit shuffle (measurements: docs/design/tiles.md).
+
+    Stores written with another Blosc codec are read as they are (the codec is
+    in each array's metadata).
+    """
+    return zarr.codecs.BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle")
+
+
+def open_group(url: str, storage_options: dict[str, Any] | None, mode: str) -> zarr.Group:
+    """The Zarr v3 group at a local path or fsspec URL, opened with ``mode`` (``r``, ``r+``, ``w``)."""
+    kw: dict[str, Any] = {"mode": mode, "zarr_format": 3}
+    if paths.is_local(url):
+        return zarr.open_group(paths.local_path(url), **kw)
+    return zarr.open_group(url, storage_options=storage_options, **kw)
 
 
 @functools.lru_cache(maxsize=None)
@@ -98,4 +104,4 @@ def write_array(group_url: str, name: str, values: np.ndarray, storage_options: 
     fs.pipe({f"{p}/{key}": data for key, data in files.items()})
 
 
-__all__ = ["CHUNK_KEY_ENCODING", "array_files", "write_array"]
+__all__ = ["CHUNK_KEY_ENCODING", "TILE_CHUNK", "array_files", "open_group", "tile_compressor", "write_array"]

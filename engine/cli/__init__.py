@@ -2,28 +2,34 @@
 
 Subcommands live in this package, one module each, discovered at start:
 a module defines ``NAME``, ``HELP``, ``ORDER``, ``configure(parser)`` and
-``run(args) -> int``.  User mistakes (:class:`tiles.errors.UserError`) print one
-line naming the file and the problem and exit with status 2, never a traceback.
+``run(args) -> int``.  Messages go through ``logging``, shown on stderr by
+:mod:`engine.cli.logs` (``-v``/``-q`` on every subcommand).  User mistakes
+(:class:`tiles.errors.UserError`) print one line naming the file and the
+problem and exit with status 2, never a traceback.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import pkgutil
 import sys
-import warnings
 from collections.abc import Sequence
 
 import engine  # noqa: F401  (registers configuration defaults)
+from engine.cli.logs import PROG, add_verbosity_options, console_logging, verbosity
+from engine.config import validate_settings
 from tiles.errors import UserError
 from tiles.tasks import TaskFailures
 
-PROG = "buildingparser"
+logger = logging.getLogger(__name__)
 
 
 def _commands():
     mods = []
     for info in pkgutil.iter_modules(__path__):
+        if info.name.startswith("_"):
+            continue  # __main__ runs the command line when imported
         mod = importlib.import_module(f"{__name__}.{info.name}")
         if hasattr(mod, "NAME") and hasattr(mod, "run"):
             mods.append(mod)
@@ -44,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP),
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.configure(p)
+        add_verbosity_options(p)
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -57,28 +64,26 @@ def _version() -> str:
         return PROG
 
 
-def _one_line_warnings(message, category, filename, lineno, file=None, line=None):
-    print(f"{PROG}: warning: {message}", file=sys.stderr)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line (``argv`` without the program name; default ``sys.argv[1:]``); returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
-    warnings.showwarning = _one_line_warnings
-    try:
-        return int(args._run(args) or 0)
-    except UserError as exc:
-        print(f"{PROG}: error: {exc.line()}", file=sys.stderr)
-        return 2
-    except TaskFailures as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
+    with console_logging(verbosity(args)):
+        try:
+            validate_settings()  # every buildingparser.* setting, before any work or cluster starts
+            return int(args._run(args) or 0)
+        except UserError as exc:
+            logger.error("%s", exc.line())
+            return 2
+        except TaskFailures as exc:
+            logger.error("%s", exc)
+            return 1
+        except KeyboardInterrupt:
+            logger.error("interrupted")
+            return 130
 
 
 if __name__ == "__main__":

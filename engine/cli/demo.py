@@ -13,7 +13,8 @@ DESCRIPTION = """\
 Generate a small synthetic building with exact ground truth as a LAZ file
 (OUT/input/building.laz and its gt.json), then run the whole pipeline on it
 and print the number of spaces, the ARI, the mAP and per-class AP, and where
-the results are (OUT/report.html first). Give INPUT to run on your own file.
+the results are (OUT/report.html first; OUT/buildingparser.log keeps every
+message of the run). Give INPUT to run on your own file.
 This is what 'make demo' runs.
 """
 
@@ -29,12 +30,16 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from engine.cli.logs import run_log
     from engine.pipeline.cluster import cluster_client
-    from engine.pipeline.run import RunSettings, run as run_pipeline, summary_lines
+    from engine.pipeline.results import summary_lines
+    from engine.pipeline.run import RunSettings
+    from engine.pipeline.run import run as run_pipeline
     from engine.synth import generate
 
     out = os.path.abspath(args.out)
-    with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
+    with run_log(out), cluster_client(args.scheduler, n_workers=args.workers,
+                                      memory_limit=args.memory_limit) as client:
         source = args.input
         if source is None:
             source = os.path.join(out, "input", "building.laz")

@@ -38,11 +38,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from engine.pipeline.cluster import check_reachable, cluster_client
     from engine.detection.detect import detect
-    from engine.outputs.labels import label_points, write_elements_json
-    from engine.metrics.detection import evaluate_detections, format_ap_table
     from engine.detection.model import load_model
+    from engine.metrics.detection import evaluate_detections, format_ap_table
+    from engine.outputs.labels import label_points, write_elements_json
+    from engine.pipeline.cluster import check_reachable, cluster_client
     from tiles.errors import UserError
     from tiles.groundtruth import DOC
     from tiles.store import open_store

@@ -2,8 +2,11 @@
 from __future__ import annotations
 
 import argparse
+import logging
 
 from engine.cli.options import add_cluster_options, add_storage_options
+
+logger = logging.getLogger(__name__)
 
 NAME = "run"
 HELP = "parse a building end to end: spaces, elements, points.laz, report.html"
@@ -17,8 +20,9 @@ update from the detected walls -> per-point labels -> outputs and metrics.
 Writes into DIR: points.laz (every input point, input order, all input
 dimensions plus classification, space_id, element_id), spaces.geojson,
 floorplan.png, elements.json, metrics.json (ARI and AP when the input has
-ground truth), report.html, and store.zarr (the tile store) unless INPUT is a
-store already. A rerun skips the stages whose inputs and settings have not
+ground truth), report.html, buildingparser.log (every message of the run,
+with timestamps), and store.zarr (the tile store) unless INPUT is a store
+already. A rerun skips the stages whose inputs and settings have not
 changed (--force redoes them).
 
 examples:
@@ -32,7 +36,8 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", metavar="INPUT",
                    help="point cloud (.las/.laz, .txt/.xyz/.pts, .e57, an S3DIS Area folder) or a tile store")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
-    p.add_argument("--model", metavar="MODEL", help="detection model (MODEL.npz + MODEL.json); default: the shipped model")
+    p.add_argument("--model", metavar="MODEL",
+                   help="detection model (MODEL.npz + MODEL.json); default: the shipped model")
     p.add_argument("--store", metavar="STORE", help="where to build the tile store (default DIR/store.zarr)")
     p.add_argument("--tile-size", type=float, metavar="M", help="tile edge in metres for a new store")
     p.add_argument("--force", action="store_true", help="redo every stage even when its earlier result is current")
@@ -44,14 +49,19 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from engine.cli.logs import run_log
     from engine.pipeline.cluster import check_reachable, cluster_client
-    from engine.pipeline.run import RunSettings, run as run_pipeline, summary_lines
+    from engine.pipeline.results import summary_lines
+    from engine.pipeline.run import RunSettings
+    from engine.pipeline.run import run as run_pipeline
 
     options = RunSettings(model=args.model, store=args.store, force=args.force, crf=not args.no_crf,
                          update=not args.no_update, export_points=not args.no_points, tile_size=args.tile_size,
                          storage_options=args.storage_options)
-    with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
-        check_reachable(client, args.input, args.out, args.store)
-        metrics = run_pipeline(args.input, args.out, client=client, options=options)
+    with run_log(args.out, args.storage_options):
+        logger.debug("run %s --out %s: %s", args.input, args.out, options)
+        with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
+            check_reachable(client, args.input, args.out, args.store)
+            metrics = run_pipeline(args.input, args.out, client=client, options=options)
     print("\n".join(summary_lines(metrics, args.out)))
     return 0

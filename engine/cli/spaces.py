@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
+
+logger = logging.getLogger(__name__)
 
 NAME = "spaces"
 HELP = "parse a tile store into spaces (rooms, hallways): cell_id and space_id per point"
@@ -36,11 +38,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from engine.pipeline.cluster import check_reachable, cluster_client
-    from engine.outputs.floorplan import draw_floorplan
     from engine.metrics.ari import distributed_ari
-    from engine.spaces.parse import SpaceSettings, parse_spaces
+    from engine.outputs.floorplan import draw_floorplan
     from engine.outputs.geojson import write_spaces_geojson
+    from engine.pipeline.cluster import check_reachable, cluster_client
+    from engine.spaces.parse import SpaceSettings, parse_spaces
     from tiles.store import open_store
 
     store = open_store(args.store, args.storage_options)
@@ -56,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"ARI final {final:.4f}, over-segmented {over:.4f}")
         if args.geojson:
             crs = (store.meta.crs or {}).get("wkt") if store.meta.crs else None
-            print(f"spaces: {write_spaces_geojson(parse, args.geojson, crs)}", file=sys.stderr)
+            logger.info("spaces: %s", write_spaces_geojson(parse, args.geojson, crs))
         if args.png:
-            print(f"floor plan: {draw_floorplan(store, parse, args.png, client=client)}", file=sys.stderr)
+            logger.info("floor plan: %s", draw_floorplan(store, parse, args.png, client=client))
     return 0

@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
 
     fmt = args.format or ("laz" if args.out.lower().endswith((".las", ".laz")) else "store")
     if args.training_yaw:
-        from engine.training.train import synthetic_yaw
+        from engine.training.synthetic import synthetic_yaw
 
         args.yaw = synthetic_yaw(args.seed)
     check_parameters(area_m2=args.area_m2, rooms=args.rooms, floors=args.floors, density=args.density, yaw=args.yaw,

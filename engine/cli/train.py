@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 NAME = "train"
 HELP = "train the element detectors on tile stores with ground truth (or on generated buildings)"
@@ -53,81 +52,30 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="train without a feature group (paper Table 3)")
     parser.add_argument("--classes", metavar="NAMES",
                         help="comma-separated element classes to train (default: all 12), e.g. ceiling,floor,wall")
-    parser.add_argument("--rounds", type=int, metavar="N", help="hard-negative mining rounds (default: ...train.rounds)")
+    parser.add_argument("--rounds", type=int, metavar="N",
+                        help="hard-negative mining rounds (default: ...train.rounds)")
     add_storage_options(parser)
     add_cluster_options(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
-    import tempfile
-    import time
-
-    from engine import config
-    from engine.pipeline.cluster import check_reachable, cluster_client
-    from engine.detection.features import ABLATIONS
     from engine.metrics.detection import format_ap_table
-    from engine.training.train import TrainSettings, cross_validate, synthetic_yaw, train
-    from tiles.errors import UserError
-    from tiles.store import open_store
+    from engine.pipeline.cluster import check_reachable, cluster_client
+    from engine.training.workflow import prepare_training, train_model
 
-    if not args.data and args.synthetic is None:
-        raise UserError(None, "nothing to train on: give tile stores with ground truth and/or --synthetic [N]")
-    n_synth = 0
-    if args.synthetic is not None:
-        n_synth = int(config.get("detection.train.synthetic-buildings", 6)) if args.synthetic < 0 else args.synthetic
-        if n_synth < 1 and not args.data:
-            raise UserError(None, "--synthetic needs N >= 1")
-    seed = int(config.get("detection.train.synthetic-seed", 1000) if args.seed is None else args.seed)
-    area = float(config.get("detection.train.synthetic-area-m2", 250) if args.area is None else args.area)
-    extra = {}
-    if args.classes:
-        from tiles.classes import ELEMENT_CLASSES
-
-        names = [c.strip().lower() for c in args.classes.split(",") if c.strip()]
-        bad = [c for c in names if c not in ELEMENT_CLASSES]
-        if bad or not names:
-            raise UserError(None, f"--classes: unknown class(es) {', '.join(bad) or '(none)'}; "
-                                  f"choose from {', '.join(ELEMENT_CLASSES)}")
-        extra["classes"] = tuple(ELEMENT_CLASSES.index(c) for c in names)
-    if args.rounds is not None:
-        if args.rounds < 0:
-            raise UserError(None, "--rounds must be >= 0")
-        extra["rounds"] = args.rounds
-    settings = TrainSettings.from_config(disabled=ABLATIONS[args.ablation], **extra)
-    log = lambda s: print(f"train: {s}", file=sys.stderr, flush=True)  # noqa: E731
-    with tempfile.TemporaryDirectory(prefix="bp-train-") as tmp, \
-            cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
+    plan = prepare_training(args.data, args.model, synthetic=args.synthetic, seed=args.seed, area=args.area,
+                            keep_synthetic=args.keep_synthetic, cv=args.cv, ablation=args.ablation,
+                            classes=args.classes, rounds=args.rounds, storage_options=args.storage_options)
+    with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
         check_reachable(client, *args.data)
-        stores = [open_store(d, args.storage_options) for d in args.data]
-        names = list(args.data)
-        if n_synth:
-            from engine.synth import generate
-
-            where = args.keep_synthetic or tmp
-            os.makedirs(where, exist_ok=True)
-            for i in range(n_synth):
-                out = os.path.join(where, f"synthetic-{seed + i}.zarr")
-                yaw = synthetic_yaw(seed + i)
-                log(f"generating building {i + 1}/{n_synth} (seed {seed + i}, about {area:g} m2, yaw {yaw:.1f} deg)")
-                generate(out, seed=seed + i, area_m2=area, yaw=yaw, client=client, overwrite=True)
-                stores.append(open_store(out))
-                names.append(f"synthetic seed {seed + i}")
-        cv = None
-        if args.cv:
-            cv = cross_validate(stores, client=client, settings=settings, log=log, names=names)
-            for fold in cv["folds"]:
-                print(f"fold: test on {fold['building']}")
-                print(format_ap_table([fold]))
-            print(f"cross-validated mAP (mean over folds): {100 * cv['mean_ap']:.2f}")
-        provenance = {"data": names, "synthetic": {"buildings": n_synth, "first_seed": seed, "area_m2": area}
-                      if n_synth else None, "ablation": args.ablation}
-        t0 = time.perf_counter()
-        model = train(stores, client=client, settings=settings, provenance=provenance, log=log, names=names)
-        seconds = time.perf_counter() - t0
-        model.cv = cv
-        npz, js = model.save(args.model)
-    atoms = len(model.dictionary.atoms_)
-    print(f"model written: {npz} + {js} ({atoms} windows, {int(model.trained.sum())} classes, "
-          f"{model.provenance['spaces']} spaces, {seconds:.0f} s)")
+        result = train_model(plan, client=client)
+    if result.cv is not None:
+        for fold in result.cv["folds"]:
+            print(f"fold: test on {fold['building']}")
+            print(format_ap_table([fold]))
+        print(f"cross-validated mAP (mean over folds): {100 * result.cv['mean_ap']:.2f}")
+    model = result.model
+    npz, js = result.files
+    print(f"model written: {npz} + {js} ({len(model.dictionary.atoms_)} windows, {int(model.trained.sum())} classes, "
+          f"{model.provenance['spaces']} spaces, {result.seconds:.0f} s)")
     return 0

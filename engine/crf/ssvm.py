@@ -1,33 +1,11 @@
-"""Learning the CRF weights (paper 4.1) with a structured SVM [35].
+"""Learning the CRF weights (paper 4.1) with a structured SVM [35]: 1-slack cutting planes.
 
-The training examples are spaces: their proposals ``x`` and the labels ``y*``
-(``y*_v = 1`` when proposal ``v`` is a true positive under the Pascal VOC rule
-of the evaluation: 3D IoU above 0.5 with a ground-truth box of its class, each
-box matched at most once, best score first; :func:`proposal_labels` uses the
-detection evaluation's own matching, :func:`engine.metrics.detection.match_detections`).
-The weights ``w`` (:class:`engine.crf.model.CRFWeights` as one vector) minimise the
-structured SVM objective with margin rescaling::
-
-    lambda/2 |w|^2 + 1/n sum_i max_y [ Delta(y*_i, y) + w . Psi(x_i, y) - w . Psi(x_i, y*_i) ]
-
-with ``Psi`` :func:`engine.crf.model.joint_feature`, so ``w . Psi`` is equation (1),
-and ``Delta`` a weighted Hamming loss: 1 per false proposal kept, ``miss-cost``
-per true one dropped (:func:`hamming_loss`).  Dropping a true element costs
-more than keeping a false one when the result is scored by average precision:
-a kept false positive below the true ones costs nothing there, a dropped true
-one is lost recall.  The loss-augmented inference is the SAME integer program
-as inference with the loss added to the unaries (it is linear in ``y``:
-``+1`` on false proposals, ``-miss_cost`` on true ones).
-
-Optimiser: the 1-slack cutting-plane algorithm (Joachims, Finley and Yu, 2009;
-the 1-slack form of [35]).  Every iteration runs the loss-augmented inference of
-all spaces at the same weights, in parallel (one dask task per space), adds
-their mean as one cutting plane, and re-solves the dual over the planes found
-so far, a QP with as many variables as iterations (SciPy SLSQP).  The primal
-objective is exact at every iteration (every space's most violated labelling
-is found) and the QP's value is a lower bound, so the gap between them is a
-certificate; training stops when it falls below ``tol`` relative.  No random
-order, no step size: deterministic on any cluster.
+The weights minimise ``lambda/2 |w|^2 + 1/n sum_i max_y [Delta(y*_i, y) + w . Psi(x_i, y) - w . Psi(x_i, y*_i)]``
+with ``Delta`` a weighted Hamming loss (:func:`hamming_loss`).  Each iteration runs the loss-augmented
+inference of every space (one dask task per space) and re-solves the small dual over the cutting planes
+found so far (:func:`solve_working_set`); deterministic on any cluster.  :func:`train_crf` labels the
+proposals, chooses the miss cost and the classes the CRF decides (:mod:`engine.crf.validation`) and fits.
+Design notes: ``docs/design/crf.md``.
 """
 from __future__ import annotations
 
@@ -40,47 +18,13 @@ from typing import Any
 import numpy as np
 
 from engine import config
-from engine.crf.model import CRFSettings, CRFWeights, build_graph, energies, joint_feature, solve_ip
-from engine.metrics.detection import boxes_array, match_detections
+from engine.crf.graph import build_graph, energies, joint_feature
+from engine.crf.labels import label_spaces
+from engine.crf.model import CRFSettings, CRFWeights
+from engine.crf.solve import solve_ip
+from engine.crf.validation import choose
 from engine.detection.proposals import Proposal
 from tiles.tasks import run_tasks
-
-
-# -----------------------------------------------------------------------------------------
-# Ground-truth labels
-# -----------------------------------------------------------------------------------------
-def proposal_labels(proposals: Sequence[Proposal], ground_truth: Sequence[dict[str, Any]],
-                    iou_threshold: float = 0.5) -> np.ndarray:
-    """``y*``: True for proposals that are true positives against the ground-truth boxes of their space.
-
-    Parameters
-    ----------
-    proposals
-        Proposals (world ``center``, ``world_size``, ``yaw``, ``class_code``, ``score``).
-    ground_truth
-        Ground-truth element records (``class_code``, ``center``, ``size``, ``yaw``), e.g. the
-        ``elements`` of ``meta/ground_truth`` that belong to this space.
-    iou_threshold
-        A proposal matches a box when their 3D IoU exceeds this.
-    """
-    if not 0 < iou_threshold < 1:
-        raise ValueError(f"iou_threshold must be in (0, 1), not {iou_threshold}")
-    n = len(proposals)
-    labels = np.zeros(n, dtype=bool)
-    if n == 0:
-        return labels
-    boxes = np.array([[*p.center, *p.world_size, p.yaw] for p in proposals], dtype=np.float64).reshape(n, 7)
-    cls = np.array([p.class_code for p in proposals], dtype=np.int64)
-    scores = np.array([p.score for p in proposals], dtype=np.float64)
-    gt = list(ground_truth)
-    gt_boxes = boxes_array(gt)
-    gt_cls = np.array([int(g["class_code"]) for g in gt], dtype=np.int64)
-    for c in np.unique(cls):
-        d = np.flatnonzero(cls == c)
-        g = gt_cls == c
-        if g.any():
-            labels[d] = match_detections(boxes[d], scores[d], d, gt_boxes[g], iou_threshold)
-    return labels
 
 
 # -----------------------------------------------------------------------------------------
@@ -112,29 +56,6 @@ def _predict(example: tuple[list[Proposal], np.ndarray], weights: CRFWeights, se
     unary, pairwise = energies(graph, weights)
     y, info = solve_ip(unary, graph.edges, pairwise, settings)
     return {"errors": int(np.sum(y != ystar)), "nodes": len(y), "status": info["status"]}
-
-
-def group_by_space(proposals: Sequence[Proposal], ground_truth: Sequence[dict[str, Any]]
-                   ) -> tuple[list[list[Proposal]], list[list[dict[str, Any]]]]:
-    """Proposals detected on the ground-truth spaces of one building, with those spaces' ground-truth elements.
-
-    ``proposals`` come from ``engine.detection.detect.detect(store, space_array="gt_space")`` (their
-    ``space_id`` is the ground-truth space), ``ground_truth`` is the ``elements`` list of the store's
-    ``meta/ground_truth`` (each with its ``space``).  Returns the two lists :func:`train_crf` takes,
-    one entry per space that has proposals, in space order.
-    """
-    props: dict[int, list[Proposal]] = {}
-    for p in proposals:
-        props.setdefault(int(p.space_id), []).append(p)
-    gts: dict[int, list[dict[str, Any]]] = {}
-    for g in ground_truth:
-        gts.setdefault(int(g.get("space", -1)), []).append(g)
-    sids = sorted(props)
-    return [props[s] for s in sids], [gts.get(s, []) for s in sids]
-
-
-def _label_task(job: tuple[list[Proposal], list[dict[str, Any]]], iou: float) -> np.ndarray:
-    return proposal_labels(job[0], job[1], iou)
 
 
 # -----------------------------------------------------------------------------------------
@@ -222,18 +143,7 @@ def fit_ssvm(examples: Sequence[tuple[list[Proposal], np.ndarray]], init: CRFWei
     settings
         CRF graph and solver settings; None reads ``buildingparser.crf.*``.
     """
-    lam = float(config.get("crf.ssvm.lam", 0.01) if lam is None else lam)
-    iterations = int(config.get("crf.ssvm.iterations", 50) if iterations is None else iterations)
-    tol = float(config.get("crf.ssvm.tol", 0.01) if tol is None else tol)
-    miss_cost = float(config.get("crf.ssvm.miss-cost", 1.0) if miss_cost is None else miss_cost)
-    if not (lam > 0 and math.isfinite(lam)):
-        raise ValueError(f"lam must be positive, not {lam}")
-    if iterations < 1:
-        raise ValueError(f"iterations must be >= 1, not {iterations}")
-    if tol < 0:
-        raise ValueError(f"tol must be >= 0, not {tol}")
-    if not (miss_cost > 0 and math.isfinite(miss_cost)):
-        raise ValueError(f"miss_cost must be positive, not {miss_cost}")
+    lam, iterations, tol, miss_cost = _ssvm_parameters(lam, iterations, tol, miss_cost)
     settings = settings or CRFSettings.from_config()
     examples = [(list(p), np.asarray(y, dtype=bool)) for p, y in examples if len(p)]
     for p, y in examples:
@@ -285,6 +195,24 @@ def fit_ssvm(examples: Sequence[tuple[list[Proposal], np.ndarray]], init: CRFWei
     return result
 
 
+def _ssvm_parameters(lam: float | None, iterations: int | None, tol: float | None,
+                     miss_cost: float | None) -> tuple[float, int, float, float]:
+    """The S-SVM's ``lam``, ``iterations``, ``tol`` and ``miss_cost``, checked (None: ``buildingparser.crf.ssvm.*``)."""
+    lam = float(config.setting("crf.ssvm.lam") if lam is None else lam)
+    iterations = int(config.setting("crf.ssvm.iterations") if iterations is None else iterations)
+    tol = float(config.setting("crf.ssvm.tol") if tol is None else tol)
+    miss_cost = float(config.setting("crf.ssvm.miss-cost") if miss_cost is None else miss_cost)
+    if not (lam > 0 and math.isfinite(lam)):
+        raise ValueError(f"lam must be positive, not {lam}")
+    if iterations < 1:
+        raise ValueError(f"iterations must be >= 1, not {iterations}")
+    if tol < 0:
+        raise ValueError(f"tol must be >= 0, not {tol}")
+    if not (miss_cost > 0 and math.isfinite(miss_cost)):
+        raise ValueError(f"miss_cost must be positive, not {miss_cost}")
+    return lam, iterations, tol, miss_cost
+
+
 def ssvm_objective(examples: Sequence[Any], weights: CRFWeights, lam: float, *, miss_cost: float = 1.0,
                    client=None, settings: CRFSettings | None = None) -> float:
     """The S-SVM objective ``lambda/2 |w|^2 + mean_i max_y [loss + w.Psi(y) - w.Psi(y*)]`` at ``weights``.
@@ -314,7 +242,7 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
               tol: float | None = None, miss_cost: float | None = None, iou_threshold: float | None = None,
               buildings: Sequence[Any] | None = None, miss_costs: Sequence[float] | None = None,
               client=None, settings: CRFSettings | None = None,
-              report: dict[str, Any] | None = None, say=None) -> CRFWeights:
+              report: dict[str, Any] | None = None) -> CRFWeights:
     """Learn :class:`engine.crf.model.CRFWeights` from detected proposals and ground-truth boxes, space by space.
 
     Parameters
@@ -346,26 +274,17 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
         If given, filled with ``history``, ``errors``, ``objective``, ``converged``, ``statuses`` (see
         :class:`SSVMResult`), ``spaces`` and ``positives`` / ``proposals`` (label counts), ``miss_cost``
         and ``validation`` (the choice's report, or None).
-    say
-        Optional ``say(message)`` for progress.
     """
-    from engine.crf.validation import choose
-
     if len(proposals_per_space) != len(ground_truth_per_space):
         raise ValueError("one ground-truth list per space of proposals expected")
     if buildings is not None and len(buildings) != len(proposals_per_space):
         raise ValueError("one building label per space expected")
-    iou = float(config.get("crf.ssvm.iou", 0.5) if iou_threshold is None else iou_threshold)
+    iou = float(config.setting("crf.ssvm.iou") if iou_threshold is None else iou_threshold)
     if grid is None:
-        first = next((p for props in proposals_per_space for p in props), None)
-        if first is None:
-            raise ValueError("no proposals to train on")
-        grid = int(np.asarray(first.occupancy).shape[0])
-    default = float(config.get("crf.ssvm.miss-cost", 1.0) if miss_cost is None else miss_cost)
-    costs = [default] if miss_cost is not None else [float(c) for c in (
-        miss_costs if miss_costs is not None else config.get("crf.train.miss-costs", None) or [default])]
+        grid = _grid_of(proposals_per_space)
+    default, costs = _miss_costs(miss_cost, miss_costs)
     jobs = [(list(p), list(g)) for p, g in zip(proposals_per_space, ground_truth_per_space)]
-    labels = run_tasks(_label_task, jobs, client=client, label="S-SVM labels", extra_args=(iou,))
+    labels = label_spaces([p for p, _ in jobs], [g for _, g in jobs], iou, client=client)
     init = CRFWeights.new(grid, k=k)
     fit_kw = dict(lam=lam, iterations=iterations, tol=tol, client=client, settings=settings)
     validation = None
@@ -374,7 +293,7 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
         chosen, decides, validation = choose(
             [p for p, _ in jobs], [g for _, g in jobs], labels, list(buildings), costs, init,
             lambda ex, w, c: fit_ssvm(ex, w, miss_cost=c, **fit_kw).weights, client=client, settings=settings,
-            iou=iou, say=say)
+            iou=iou)
         cost = default if chosen is None else chosen
     # every class free, as in the folds that chose the gate; the gate applies when the weights are used
     res = fit_ssvm([(p, y) for (p, _), y in zip(jobs, labels)], init, miss_cost=cost, **fit_kw)
@@ -386,3 +305,19 @@ def train_crf(proposals_per_space: Sequence[Sequence[Proposal]],
                       spaces=sum(1 for p, _ in jobs if p), positives=int(sum(int(y.sum()) for y in labels)),
                       proposals=int(sum(len(y) for y in labels)), miss_cost=cost, validation=validation)
     return res.weights
+
+
+def _grid_of(proposals_per_space: Sequence[Sequence[Proposal]]) -> int:
+    """``K`` of the occupancy patterns of the first proposal."""
+    first = next((p for props in proposals_per_space for p in props), None)
+    if first is None:
+        raise ValueError("no proposals to train on")
+    return int(np.asarray(first.occupancy).shape[0])
+
+
+def _miss_costs(miss_cost: float | None, miss_costs: Sequence[float] | None) -> tuple[float, list[float]]:
+    """The default miss cost and the candidates to choose from (only ``miss_cost`` when it is given)."""
+    default = float(config.setting("crf.ssvm.miss-cost") if miss_cost is None else miss_cost)
+    costs = [default] if miss_cost is not None else [float(c) for c in (
+        miss_costs if miss_costs is not None else config.setting("crf.train.miss-costs") or [default])]
+    return default, costs

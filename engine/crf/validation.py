@@ -1,37 +1,28 @@
 """Where the CRF decides, and with which miss cost: chosen by building-wise folds of its training data.
 
-The structured SVM (:mod:`engine.crf.ssvm`) minimises wrong keep/drop decisions, a weighted Hamming
-loss, not average precision; a kept set can only lose recall against all proposals, and every true
-element it drops costs AP while a false one it keeps below the true ones costs nothing.  So two
-things are chosen on the CRF's own training buildings, out of fold (each building's spaces are
-decided by weights learnt on the other buildings):
-
-* **the miss cost** (``buildingparser.crf.train.miss-costs``): the candidate whose out-of-fold kept
-  sets, with the gate below, have the highest mean AP over the classes (ties: the first candidate);
-* **the classes the CRF decides** (:attr:`engine.crf.model.CRFWeights.decides`): those whose out-of-fold
-  kept set beats the AP of the detector's own set (score > 0) on the same spaces by at least
-  :data:`MARGIN` (the re-ranking's rule, :mod:`engine.detection.rescore`).  The other
-  classes keep the detector's decision and enter the CRF only as context; so do classes without a
-  ground-truth element in the training data (nothing to judge the CRF's choice by).
-
-The shipped model's CRF, trained on two 120 m2 buildings, dropped every column on every held-out
-building (its column bias was learnt from 14 columns ranked at 13.6 AP): the gate gives them back
-to the detector.  Fewer than two buildings: no folds, no choice (the caller's miss cost), every
-class decided.
+Each building's spaces are decided by weights learnt on the other buildings; the miss cost is the
+candidate with the best mean AP of the gated out-of-fold kept sets, and a class is decided by the CRF
+only where its out-of-fold kept set beats the detector's own set by :data:`MARGIN`.  Design notes:
+``docs/design/crf.md``.
 """
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from engine.crf.model import N_CLASSES, CRFSettings, CRFWeights, _crf_task
-from engine.metrics.detection import average_precision
+from engine.crf.apply import select_space
+from engine.crf.labels import proposal_labels
+from engine.crf.model import N_CLASSES, CRFSettings, CRFWeights
 from engine.detection.proposals import Proposal
 from engine.detection.rescore import building_folds
+from engine.metrics.detection import average_precision
 from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
+
+logger = logging.getLogger(__name__)
 
 #: Most folds of buildings (fewer buildings: one fold each, i.e. leave one building out).
 FOLDS = 5
@@ -42,8 +33,6 @@ MARGIN = 0.01
 def set_ap(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_space: Sequence[Sequence[dict]],
            keep_per_space: Sequence[np.ndarray], iou: float = 0.5) -> np.ndarray:
     """``(12,)`` AP per class of the kept proposals of every space, pooled (NaN: no ground truth)."""
-    from engine.crf.ssvm import proposal_labels
-
     scores: list[list[float]] = [[] for _ in range(N_CLASSES)]
     tps: list[list[bool]] = [[] for _ in range(N_CLASSES)]
     n_gt = np.zeros(N_CLASSES, dtype=np.int64)
@@ -69,8 +58,8 @@ def gate(ap_crf: np.ndarray, ap_set: np.ndarray, margin: float = MARGIN) -> np.n
 
 def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_space: Sequence[Sequence[dict]],
            labels: Sequence[np.ndarray], buildings: Sequence[Any], miss_costs: Sequence[float], init: CRFWeights,
-           fit: Any, *, client=None, settings: CRFSettings | None = None, iou: float = 0.5,
-           say=None) -> tuple[float | None, np.ndarray, dict[str, Any]]:
+           fit: Any, *, client=None, settings: CRFSettings | None = None,
+           iou: float = 0.5) -> tuple[float | None, np.ndarray, dict[str, Any]]:
     """Miss cost and ``decides`` mask by building-wise folds; also the JSON report of the choice.
 
     With fewer than two buildings nothing can be chosen: the miss cost is None, every class decided.
@@ -78,7 +67,7 @@ def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
     Parameters
     ----------
     proposals_per_space, ground_truth_per_space, labels
-        The training spaces' proposals, ground truth and ``y*`` (:func:`engine.crf.ssvm.proposal_labels`).
+        The training spaces' proposals, ground truth and ``y*`` (:func:`engine.crf.labels.proposal_labels`).
     buildings
         The building of each space (any labels; spaces of one building are never split across folds).
     miss_costs
@@ -113,12 +102,11 @@ def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
         for k in range(n_folds):
             train = [i for i in range(len(fold)) if fold[i] != k and len(proposals_per_space[i])]
             test = [i for i in range(len(fold)) if fold[i] == k and len(proposals_per_space[i])]
-            if say:
-                say(f"CRF validation: miss cost {cost:g}, fold {k + 1}/{n_folds} ({len(train)} spaces to train on)")
+            logger.info(f"CRF validation: miss cost {cost:g}, fold {k + 1}/{n_folds} ({len(train)} spaces to train on)")
             if not train or not test:
                 continue
             w = fit([(list(proposals_per_space[i]), labels[i]) for i in train], init, cost)
-            outs = run_tasks(_crf_task, [list(proposals_per_space[i]) for i in test], client=client,
+            outs = run_tasks(select_space, [list(proposals_per_space[i]) for i in test], client=client,
                              label="CRF validation", extra_args=(w, settings))
             for i, (mask, _, _) in zip(test, outs):
                 keep[i] = mask

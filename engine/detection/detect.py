@@ -107,11 +107,7 @@ class DetectionSettings:
     @classmethod
     def from_config(cls, **overrides: Any) -> "DetectionSettings":
         """Settings from ``buildingparser.detection.*``, with keyword overrides."""
-        kw = {}
-        for f in fields(cls):
-            v = config.get(f"detection.{f.name.replace('_', '-')}")
-            if v is not None:
-                    kw[f.name] = v if isinstance(f.default, tuple) else type(f.default)(v)
+        kw = config.settings_fields(cls, "detection")
         kw.update(overrides)
         return cls(**kw)
 

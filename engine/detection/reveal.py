@@ -58,13 +58,9 @@ class RevealSettings:
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "RevealSettings":
-        kw: dict[str, Any] = {}
-        for name, key in (("classes", "reveal-classes"), ("grow", "reveal-grow"), ("quantile", "reveal-quantile"),
-                          ("thin_voxels", "reveal-thin-voxels"), ("solid_classes", "solid-classes"),
-                          ("solid_edge", "solid-edge")):
-            v = config.get(f"detection.{key}")
-            if v is not None:
-                kw[name] = v if name.endswith("classes") else type(getattr(cls, name))(v)
+        kw = config.settings_fields(cls, "detection", keys={
+            "classes": "reveal-classes", "grow": "reveal-grow", "quantile": "reveal-quantile",
+            "thin_voxels": "reveal-thin-voxels", "solid_classes": "solid-classes", "solid_edge": "solid-edge"})
         kw.update(overrides)
         return cls(**kw)
 

@@ -13,9 +13,9 @@ import math
 import os
 from typing import TYPE_CHECKING, Any
 
-import dask.config
 import numpy as np
 
+from engine import config
 from engine.spaces.alignment import Frame
 from engine.spaces.parse import SpaceParse
 from tiles.store import TileStore
@@ -27,9 +27,8 @@ if TYPE_CHECKING:
 
 def plan_pixel(extent: float, min_pixel: float | None = None, max_pixels: int | None = None) -> float:
     """Pixel size (m) for a plan whose longer side is ``extent`` metres."""
-    cfg = dask.config.get("buildingparser.spaces.floorplan", {}) or {}
-    min_pixel = float(min_pixel or cfg.get("min-pixel", 0.05))
-    max_pixels = int(max_pixels or cfg.get("max-pixels", 3000))
+    min_pixel = float(min_pixel or config.setting("spaces.floorplan.min-pixel"))
+    max_pixels = int(max_pixels or config.setting("spaces.floorplan.max-pixels"))
     return max(min_pixel, extent / max_pixels)
 
 

@@ -243,7 +243,7 @@ def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margi
 
     Returns the number of points labelled with an element class.
     """
-    margin = float(config.get("detection.label-margin", 0.02) if margin is None else margin)
+    margin = float(config.setting("detection.label-margin") if margin is None else margin)
     boxes = _boxes(list(elements))
     bounds = _world_bounds(boxes, margin)
     items, subsets = [], []

@@ -19,7 +19,6 @@ import logging
 import os
 import socket
 import ssl
-import sys
 from collections.abc import Iterator
 from urllib.parse import urlparse
 
@@ -31,12 +30,14 @@ from engine import config
 from tiles import paths
 from tiles.errors import UserError
 
+logger = logging.getLogger(__name__)
+
 _LOOPBACK = {"localhost", "127.0.0.1", "::1", "", None}
 
 
 def scheduler_address(scheduler: str | None = None) -> str | None:
     """The address of the existing cluster to use, or None for an embedded one."""
-    return (scheduler or config.get("scheduler") or dask.config.get("scheduler-address", None)
+    return (scheduler or config.setting("scheduler") or dask.config.get("scheduler-address", None)
             or os.environ.get("DASK_SCHEDULER_ADDRESS") or None)
 
 
@@ -53,24 +54,24 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
     n_workers, threads_per_worker, memory_limit
         Size of the embedded LocalCluster (ignored for an existing cluster).
     quiet
-        Do not print the dashboard link.
+        Do not log the dashboard link.
     """
     address = scheduler_address(scheduler)
     if address:
         security = _security_for(address)
         try:
-            client = Client(address, timeout=config.get("connect-timeout", "20s"), security=security)
+            client = Client(address, timeout=config.setting("connect-timeout"), security=security)
         except (OSError, TimeoutError, TypeError, ValueError, ssl.SSLError) as exc:
             raise UserError(address, f"cannot reach the dask scheduler ({type(exc).__name__}: {exc})") from None
         cluster = None
     else:
-        workers = n_workers or config.get("n-workers") or max(1, os.cpu_count() or 1)
+        workers = n_workers or config.setting("n-workers") or max(1, os.cpu_count() or 1)
         cluster = LocalCluster(
             n_workers=int(workers),
-            threads_per_worker=int(threads_per_worker or config.get("threads-per-worker") or 1),
-            memory_limit=memory_limit or config.get("memory-limit") or "auto",
+            threads_per_worker=int(threads_per_worker or config.setting("threads-per-worker")),
+            memory_limit=memory_limit or config.setting("memory-limit"),
             processes=True,
-            dashboard_address=config.get("dashboard-address"),
+            dashboard_address=config.setting("dashboard-address"),
             silence_logs=logging.ERROR,
         )
         client = Client(cluster)
@@ -79,7 +80,7 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
         if not quiet:
             link = client.dashboard_link if _has_dashboard(client) else "(no dashboard)"
             where = address or f"local cluster, {len(client.scheduler_info()['workers'])} workers"
-            print(f"dask: {where}; dashboard: {link}", file=sys.stderr)
+            logger.info("dask: %s; dashboard: %s", where, link)
         yield client
     finally:
         client.close()
@@ -125,8 +126,7 @@ class LibraryThreads(WorkerPlugin):
 def library_threads() -> int | None:
     """``buildingparser.library-threads``: threads of the libraries' own pools per worker (None: the worker's
     thread count; 0: leave the libraries' defaults)."""
-    v = config.get("library-threads")
-    return None if v is None else int(v)
+    return config.setting("library-threads")
 
 
 def pin_library_threads(client: Client | None) -> None:
@@ -187,7 +187,7 @@ def _own_addresses() -> set[str]:
 
 def check_reachable(client: Client | None, *locations: str) -> None:
     """Refuse local paths when the workers are elsewhere and share no file system with us."""
-    if not is_remote(client) or config.get("shared-filesystem"):
+    if not is_remote(client) or config.setting("shared-filesystem"):
         return
     for loc in locations:
         if loc and paths.is_local(str(loc)):

@@ -43,7 +43,7 @@ class StageRecord:
                 "failed": self.failed, "outputs": self.outputs}
 
     @classmethod
-    def from_json(cls, name: str, d: dict[str, Any]) -> "StageRecord":
+    def from_json(cls, name: str, d: dict[str, Any]) -> StageRecord:
         return cls(name, d.get("fingerprint", ""), d.get("status", "failed"), d.get("seconds", 0.0),
                    dict(d.get("failed", {})), dict(d.get("outputs", {})))
 
@@ -80,7 +80,7 @@ class StageLog:
 
 
 @contextlib.contextmanager
-def failures_recorded(log: "StageLog", name: str, fp: str) -> Iterator[None]:
+def failures_recorded(log: StageLog, name: str, fp: str) -> Iterator[None]:
     """Record a stage as ``failed`` (with each failed tile or space and its error) if its tasks keep failing.
 
     The exception still propagates: the run stops with a non-zero exit, the
@@ -100,7 +100,7 @@ def failures_recorded(log: "StageLog", name: str, fp: str) -> Iterator[None]:
 class Timer:
     """Wall seconds of a block: ``with Timer() as t: ...; t.seconds``."""
 
-    def __enter__(self) -> "Timer":
+    def __enter__(self) -> Timer:
         self.start = time.perf_counter()
         self.seconds = 0.0
         return self

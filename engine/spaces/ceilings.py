@@ -96,7 +96,7 @@ from typing import Any
 import numpy as np
 
 from engine.spaces.merging import Edge
-from engine.spaces.ridges import Occupancy, RidgeLine, RidgeSettings, _lines
+from engine.spaces.ridges import Occupancy, RidgeLine, RidgeSettings, ridge_lines
 
 
 @dataclass(frozen=True)
@@ -233,7 +233,7 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
     each lie at one height (the spread between their ``1 - level_quantile`` and ``level_quantile`` quantiles is
     below ``step``: one ceiling, not a window that straddles the step, and not a beam with the ceiling beside
     it or its shadow), and their median heights differ by at least ``step`` metres.  Steps are followed from
-    chunk to chunk like ridges (:func:`engine.spaces.ridges._lines`: a line runs ``min_run`` m at least, within one
+    chunk to chunk like ridges (:func:`engine.spaces.ridges.ridge_lines`: a line runs ``min_run`` m at least, within one
     pixel); a line within ``min_spacing`` of a ridge line over the same stretch is that wall and is left out.
 
     With ``min_partition`` > 0 a run of a line is kept only where a partition stands under it
@@ -278,7 +278,7 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
         if test:
             normal, along = (pu, pv) if axis == 0 else (pv, pu)
             lower = np.fmin(before, after)  # the lower ceiling's level at each step (z bins)
-        for r in _lines(mask, np.nan_to_num(diff), axis, 0, 0, 1, rp, pm):
+        for r in ridge_lines(mask, np.nan_to_num(diff), axis, 0, 0, 1, rp, pm):
             line = RidgeLine(axis, n0 + r.cut * px, tuple((a0 + a * c * px, a0 + b * c * px) for a, b in r.runs),
                              r.strength, n0 + (r.lo if r.lo is not None else r.cut) * px,
                              n0 + (r.hi if r.hi is not None else r.cut) * px)

@@ -329,9 +329,9 @@ def histogram_pass(fn, tiles: list[str], lo: np.ndarray, length: np.ndarray, *, 
     data are futures on the workers (:class:`engine.spaces.refine.PieceStore`) gives them as the tasks'
     inputs (``task_input``), so that each task runs where its data is.
     """
-    import dask.config
+    from engine import config
 
-    batch = max(1, int(dask.config.get("buildingparser.spaces.batch-tiles", 256) or 256))
+    batch = config.setting("spaces.batch-tiles")
     out = [np.zeros(int(n), dtype=np.int64) for n in length]
     task_input = getattr(extra_args[0], "task_input", None) if extra_args and client is not None else None
     for start in range(0, len(tiles), batch):

@@ -74,10 +74,9 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import dask.config
 import numpy as np
 
-from engine import config  # noqa: F401  (registers the defaults)
+from engine import config
 from engine.spaces.alignment import AlignmentSettings, Frame, estimate_alignment, tile_evidence
 from engine.spaces.ceilings import CeilingSettings
 from engine.spaces.dividers import DividerSettings, vertical_params
@@ -169,26 +168,7 @@ class SpaceSettings:
     @classmethod
     def from_config(cls, **overrides: Any) -> "SpaceSettings":
         """The parameters under ``buildingparser.spaces`` in dask.config, with overrides."""
-        c = dict(dask.config.get("buildingparser.spaces", {}) or {})
-        c = {k.replace("-", "_"): v for k, v in c.items()}
-        kw: dict[str, Any] = {}
-        for name in ("bin_width", "z_bin", "yaw", "max_levels", "slicing_void_ratio", "slicing_void_ratio_full",
-                     "min_storey_height", "upper_band", "merge_window",
-                     "min_face", "min_space_area", "min_space_width", "min_relative_density", "min_open_ratio",
-                     "min_scanned_density", "refine_min_area", "refine_snap_deg",
-                     "refine_separation_deg", "refine_min_second", "refine_block", "refine_smooth", "rejoin"):
-            if c.get(name) is not None:
-                kw[name] = c[name]
-        if c.get("walls"):
-            kw["walls"] = DividerSettings.from_dict(c["walls"])
-        if c.get("slabs"):
-            kw["slabs"] = DividerSettings.from_dict(c["slabs"])
-        if c.get("alignment"):
-            kw["alignment"] = AlignmentSettings.from_dict(c["alignment"])
-        if c.get("ridges"):
-            kw["ridges"] = RidgeSettings.from_dict(c["ridges"])
-        if c.get("ceilings"):
-            kw["ceilings"] = CeilingSettings.from_dict(c["ceilings"])
+        kw = config.settings_fields(cls, "spaces")  # walls, slabs, alignment, ridges, ceilings: their sections
         kw.update(overrides)
         return cls(**kw)
 

@@ -30,7 +30,6 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import dask
 import numpy as np
 
 from scipy import ndimage
@@ -487,8 +486,8 @@ def refine_spaces(items: list[dict[str, Any]], store, index: BoxIndex, grid: Gri
     bins = (boxes[:, 2] - boxes[:, 1]) * (boxes[:, 4] - boxes[:, 3])
     order = sorted(range(len(items)), key=lambda i: (-int(bins[np.asarray(items[i]["cells"], np.int64)].sum()), i))
     shared = share(client, index)
-    retries = int(dask.config.get("buildingparser.retries", 2))
-    pieces_points = int(config.get("spaces.refine-pieces-points") or 0)
+    retries = config.setting("retries")
+    pieces_points = config.setting("spaces.refine-pieces-points") or 0
     jobs = [dict(items[i], pieces_points=pieces_points) for i in order]
 
     def with_pieces(job: dict[str, Any]) -> dict[str, Any]:

@@ -201,10 +201,10 @@ def find_ridges(normal: np.ndarray, along: np.ndarray, low: np.ndarray, axis: in
     h = np.bincount(key, minlength=n * k).reshape(n, k)
     hl = np.bincount(key[np.asarray(low, dtype=bool)], minlength=n * k).reshape(n, k)
     mask, ratio = ridge_mask(h, hl, p, bin_width)
-    return _lines(mask, ratio, axis, n0, a0, cb, p, bin_width)
+    return ridge_lines(mask, ratio, axis, n0, a0, cb, p, bin_width)
 
 
-def _lines(mask: np.ndarray, ratio: np.ndarray, axis: int, n0: int, a0: int, cb: int, p: RidgeSettings,
+def ridge_lines(mask: np.ndarray, ratio: np.ndarray, axis: int, n0: int, a0: int, cb: int, p: RidgeSettings,
            bin_width: float) -> list[RidgeLine]:
     """Ridge lines from the per-(normal bin, chunk) ridge mask: chunks linked along the wall by tracking.
 

@@ -75,8 +75,7 @@ class UpdateSettings:
     @classmethod
     def from_config(cls, **overrides: Any) -> "UpdateSettings":
         """``buildingparser.space-update.*`` with keyword overrides (None = use the setting)."""
-        c = {k.replace("-", "_"): v for k, v in dict(config.get("space-update", {}) or {}).items()}
-        c = {k: float(v) for k, v in c.items() if k in ("coverage", "distance", "max_angle", "min_height")}
+        c = config.settings_fields(cls, "space-update")
         c.update({k: v for k, v in overrides.items() if v is not None})
         return cls(**c)
 

@@ -17,11 +17,11 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 
-import dask
 import numpy as np
 import shapely
 from shapely.geometry import box
 
+from engine import config
 from engine.synth import colours, furniture, shapes, structure
 from engine.synth.hard import plan as hard_plan
 from engine.synth.building import Building, Element, FloorInfo, Frame, Opening, PartSpec, Space, Wall
@@ -57,7 +57,7 @@ def check_parameters(*, area_m2: float | None = None, rooms: int | None = None, 
     if rooms is not None and int(rooms) < 2 * floors:
         raise UserError(None, f"rooms must be at least two per floor (a hallway and a room): "
                               f"{2 * floors} for {floors} floor(s), not {rooms}")
-    density = float(dask.config.get("buildingparser.synth.density")) if density is None else float(density)
+    density = config.setting("synth.density") if density is None else float(density)
     if not (density > 0 and math.isfinite(density)):
         raise UserError(None, f"density must be a positive number of points per m^2, not {density}")
     if area_m2 is not None:
@@ -112,8 +112,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     area_given = area_m2 is not None
     if area_m2 is None:
         area_m2 = (max(float(rooms) * AREA_PER_SPACE, MIN_AREA_PER_FLOOR * floors) if rooms is not None
-                   else float(dask.config.get("buildingparser.synth.area-m2")))
-    part_points = int(part_points or dask.config.get("buildingparser.synth.part-points"))
+                   else config.setting("synth.area-m2"))
+    part_points = int(part_points or config.setting("synth.part-points"))
     frame = Frame(math.radians(float(yaw)), tuple(float(v) for v in offset))
 
     brng = rng_for(seed, S_BUILDING)

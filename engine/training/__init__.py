@@ -1,1 +1,2 @@
-"""Training of the detectors (paper Sec. 4): linear SVMs per class with hard-negative mining, feature-group validation, ablations."""
+"""Training of the detectors (paper Sec. 4): linear SVMs per class with hard-negative mining, feature-group
+validation, ablations."""

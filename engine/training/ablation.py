@@ -1,6 +1,6 @@
 """Several models of one window dictionary detected in one pass (the feature ablations of paper Table 3).
 
-The ablated models of :func:`engine.training.train.refit_without` share the full
+The ablated models of :func:`engine.training.svm.refit_without` share the full
 model's dictionary, voxel grid and colour normalisation and differ only in
 their SVM weights (zero on the groups they leave out).  Detecting each of them
 alone repeats, per space, the costly part: loading the points, the canonical
@@ -18,8 +18,14 @@ import dataclasses
 
 import numpy as np
 
-from engine.detection.detect import (DetectionSettings, detect_in_volume, prepare_indexed, space_frame, to_proposals,
-                              top_windows)
+from engine.detection.detect import (
+    DetectionSettings,
+    detect_in_volume,
+    prepare_indexed,
+    space_frame,
+    to_proposals,
+    top_windows,
+)
 from engine.detection.features import SpaceVolume
 from engine.detection.model import Model
 from engine.detection.proposals import Proposal

@@ -1,34 +1,30 @@
 """Per-class feature groups chosen by building-wise validation (which of Table 1's groups each class's SVM uses).
 
-The paper's ablations (Table 3) leave a feature group out of every class at
-once.  Measured on our held-out buildings, one class can be ranked far better
-without a group that helps the others (doors without the local geometry: the
-door windows' voxel normals and ratios fit the training doors and fire on
-chairs beside walls).  Training decides this per class from the training data
-alone: the buildings are split into two folds; on each, the detectors are
-trained on the other fold and, refitted without each candidate group
-(:func:`engine.training.train.refit_without`), detect the fold's ground-truth
-spaces; per class, the variant with the best pooled AP replaces the full SVM
-only if it beats it by ``MARGIN`` AP and the class has at least ``MIN_GT``
-validation elements.  The chosen classes' SVMs of the final model are then
-refitted on all its samples without their group (zero weights on those
-columns: the model keeps one feature layout).
+The paper's ablations (Table 3) leave a group out of every class at once; here each class may drop
+one, when that ranks its held-out elements at least :data:`MARGIN` AP better on two folds of the
+training buildings (and it has :data:`MIN_GT` validation elements).  The chosen classes' SVMs are
+refitted without their group (zero weights on those columns: the model keeps one feature layout).
+Design notes: ``docs/design/training.md``.
 """
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from engine.training.ablation import detect_space_many
 from engine.detection.features import ABLATIONS
-from engine.metrics.detection import evaluate_detections_serial
 from engine.detection.model import Model
+from engine.metrics.detection import evaluate_detections_serial
 from engine.spaces.points import load_space
+from engine.training.ablation import detect_space_many
+from engine.training.svm import fit_class, refit_without
 from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
+
+logger = logging.getLogger(__name__)
 
 #: AP (fraction) by which a variant must beat the full SVM of a class on the validation folds.
 MARGIN = 0.05
@@ -39,21 +35,19 @@ FOLDS = 2
 
 
 def _validation_task(job: Any, models: list[Model], det: Any) -> list[list[Any]]:
+    """Per model, the proposals of one held-out ground-truth space."""
     points = load_space(job.store, job.ref, "gt_space")
     return detect_space_many(points, models, det, np.asarray(job.store.meta.origin, dtype=np.float64))
 
 
 def validation_ap(jobs: list[Any], samples_model, candidates: tuple[str, ...], settings: Any, det: Any,
-                  client=None, say=None, folds: list | None = None) -> dict[str, dict[str, float]]:
+                  client=None, folds: list | None = None) -> dict[str, dict[str, float]]:
     """Per variant (``"full"`` and each candidate ablation), the per-class AP on building-wise folds.
 
     ``samples_model(train_jobs)`` trains on some jobs and returns ``(model, samples)``.  When
     ``folds`` is a list, each fold's held-out buildings and its models (``"full"`` then the
     candidates, in that order) are appended to it as ``(set_of_buildings, [models])``.
     """
-    from engine.training.train import refit_without
-
-    say = say or (lambda s: None)
     buildings = sorted({j.building for j in jobs})
     variants = ("full",) + tuple(candidates)
     props: dict[str, list[Any]] = {v: [] for v in variants}
@@ -64,7 +58,7 @@ def validation_ap(jobs: list[Any], samples_model, candidates: tuple[str, ...], s
         test_jobs = [j for j in jobs if j.building in held]
         if not train_jobs or not test_jobs:
             continue
-        say(f"feature groups: fold {k + 1}/{FOLDS}, training on {len(buildings) - len(held)} buildings")
+        logger.info(f"feature groups: fold {k + 1}/{FOLDS}, training on {len(buildings) - len(held)} buildings")
         model, samples = samples_model(train_jobs)
         models = [model] + [refit_without(model, samples, ABLATIONS[v], settings) for v in candidates]
         if folds is not None:
@@ -77,7 +71,8 @@ def validation_ap(jobs: list[Any], samples_model, candidates: tuple[str, ...], s
             sid = 1_000_000 * buildings.index(j.building)
             for v, found in zip(variants, r):
                 for p in found:
-                    props[v].append(dataclasses.replace(p, center=np.asarray(p.center) + shift, space_id=p.space_id + sid))
+                    props[v].append(dataclasses.replace(p, center=np.asarray(p.center) + shift,
+                                                        space_id=p.space_id + sid))
             gts += [dict(e, center=list(np.asarray(e["center"], dtype=np.float64) + shift), space=int(e["space"]) + sid)
                     for e in j.elements]
     out = {}
@@ -123,8 +118,6 @@ def compose_chosen(models: list[Model], variants: Sequence[str], chosen: dict[st
 
 def apply_groups(model: Model, samples: dict[int, Any], chosen: dict[str, str], settings: Any) -> Model:
     """The model with each chosen class's SVM (shared and per-window parts) refitted without its variant's groups."""
-    from engine.training.train import _fit_class
-
     weights, bias = model.weights.copy(), model.bias.copy()
     atom_w = None if model.atom_weights is None else model.atom_weights.copy()
     atom_b = None if model.atom_bias is None else model.atom_bias.copy()
@@ -135,7 +128,7 @@ def apply_groups(model: Model, samples: dict[int, Any], chosen: dict[str, str], 
         if not model.trained[c] or s is None or not s.pos or not s.neg:
             continue
         mask = lay.without(ABLATIONS[variant]).mask
-        fit = _fit_class(s, mask, settings)
+        fit = fit_class(s, mask, settings)
         weights[c], bias[c] = fit.weights, fit.bias
         if atom_w is not None:
             for a, atom in enumerate(model.dictionary.atoms_):

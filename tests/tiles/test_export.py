@@ -147,7 +147,7 @@ def test_existing_output_refused_and_no_partial_file_on_failure(tmp_path, monkey
     with pytest.raises(UserError, match="already exists"):
         export(store, str(tmp_path / "out.las"))
     assert (tmp_path / "out.las").read_bytes() == b"keep me"
-    import tiles.export as ex
+    import tiles.export_units as ex
 
     calls = {"n": 0}
     real = ex.pack_part
@@ -179,7 +179,8 @@ def test_classification_result_too_wide_for_a_legacy_format_is_refused(tmp_path)
 def _reference_bytes(store, path, compress):
     """What laspy itself writes for the whole store at once (one writer, LAZ compressed here), with the
     extra-bytes ranges over all points (laspy's writer takes a one-element field's from the first point)."""
-    from tiles.export import build_header, pack_part
+    from tiles.export_header import build_header
+    from tiles.export_layout import pack_part
 
     layout = plan_layout(store)
     header, evlrs = build_header(store, layout)
@@ -241,41 +242,3 @@ def test_units_need_not_follow_the_ingest_parts_nor_tiles_be_in_point_order(tmp_
     export(store, str(tmp_path / "out.laz"), client=client, part_points=1)  # rounded up to one chunk
     out = laspy.read(str(tmp_path / "out.laz"))
     np.testing.assert_array_equal(out.points.array, las.points.array)
-
-
-def test_header_statistics_of_units_add_up_to_those_of_the_whole(tmp_path):
-    from tiles.export import UnitStats, _eb_tracked, _grow_header, _set_extra_ranges, unit_stats
-
-    pf = laspy.PointFormat(6)
-    pf.add_extra_dimension(laspy.ExtraBytesParams("temp", "int16", no_data=[-1]))
-    pf.add_extra_dimension(laspy.ExtraBytesParams("pair", "2float64"))
-    header = laspy.LasHeader(version="1.4", point_format=pf)
-    rng = np.random.default_rng(2)
-    rec = laspy.PackedPointRecord.zeros(1000, pf)
-    rec.X, rec.Y, rec.Z = rng.integers(-5000, 5000, (3, 1000))
-    rec.gps_time = rng.uniform(0, 1, 1000)
-    rec.return_number = rng.integers(0, 16, 1000)
-    temp = rng.integers(0, 300, 1000)
-    temp[::3] = -1  # no data: not in the range
-    temp[0] = -1
-    rec["temp"] = temp
-    pair = rng.normal(0, 1, (1000, 2))
-    rec["pair"] = pair
-    want = header.copy()
-    want.partial_reset()
-    want.grow(rec)
-    got = header.copy()
-    got.partial_reset()
-    tracked = _eb_tracked(got)
-    assert tracked == [("temp", [-1]), ("pair", None)]
-    extra: list = [None] * len(tracked)
-    for part in (slice(0, 1), slice(1, 300), slice(300, 1000)):  # the first unit has no valid temp
-        _grow_header(got, unit_stats(rec.array[part], pf, tracked), extra)
-    _set_extra_ranges(got, tracked, extra)
-    for attr in ("mins", "maxs", "min_gps_time", "max_gps_time", "number_of_points_by_return", "point_count"):
-        np.testing.assert_array_equal(getattr(got, attr), getattr(want, attr), err_msg=attr)
-    t, p = got.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs
-    assert (t.min[0], t.max[0]) == (temp[temp >= 0].min(), temp.max())
-    np.testing.assert_array_equal(p.min, pair.min(axis=0))
-    np.testing.assert_array_equal(p.max, pair.max(axis=0))
-    assert isinstance(unit_stats(rec.array[:0], pf, tracked), UnitStats)

@@ -1,11 +1,15 @@
-"""tiles.tasks.run_tasks: results in item order, failures by key, a window of tasks in flight."""
+"""tiles.tasks.run_tasks: results in item order, failures by key, a window of tasks in flight, progress bars."""
 from __future__ import annotations
 
+import io
+import logging
+import sys
 import time
 
+import dask
 import pytest
 
-from tiles.tasks import TaskFailures, run_tasks
+from tiles.tasks import TaskFailures, quiet_progress, run_tasks
 
 
 def _slow_square(x: int, pause: float) -> int:
@@ -57,3 +61,57 @@ def test_a_window_of_one_runs_the_tasks_one_at_a_time_and_prepares_each_just_bef
     assert prepared == [1, 2, 3, 4]
     intervals = spans(ts.data)
     assert len(intervals) == 4 and overlaps(intervals) == 0
+
+
+def _double(x: int) -> int:
+    return 2 * x
+
+
+class _Terminal(io.StringIO):
+    """A stderr that says it is a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_is_quiet_when_stderr_is_not_a_terminal(capsys):
+    with dask.config.set({"buildingparser.progress": "auto"}):
+        assert run_tasks(_double, range(5), label="doubling") == [0, 2, 4, 6, 8]
+    assert capsys.readouterr().err == ""
+    with dask.config.set({"buildingparser.progress": "always"}):  # asked for: a bar wherever stderr goes
+        run_tasks(_double, range(5), label="doubling")
+    assert "doubling: 100%" in capsys.readouterr().err
+
+
+def test_progress_is_a_live_bar_on_a_terminal_that_goes_away_at_the_end(monkeypatch):
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    with dask.config.set({"buildingparser.progress": "auto"}):
+        run_tasks(_double, range(5), label="doubling")
+        drawn = term.getvalue()
+        assert drawn.startswith("\rdoubling:") and "/5 [" in drawn  # tqdm's live line, redrawn in place
+        assert not drawn.rstrip(" \r").endswith("\n")  # no line left behind: the bar is cleared
+        for quiet in (lambda: run_tasks(_double, [1], label="one task"),  # a single task: no bar
+                      lambda: _in_quiet_block(lambda: run_tasks(_double, range(5), label="quiet"))):
+            before = len(term.getvalue())
+            quiet()
+            assert term.getvalue()[before:] == ""
+    with dask.config.set({"buildingparser.progress": "never"}):
+        before = len(term.getvalue())
+        run_tasks(_double, range(5), label="never")
+        assert term.getvalue()[before:] == ""
+
+
+def _in_quiet_block(fn):
+    with quiet_progress():
+        return fn()
+
+
+def test_each_batch_logs_one_debug_line_at_its_end(caplog):
+    with caplog.at_level(logging.DEBUG, logger="tiles.tasks"):
+        run_tasks(_double, range(3), label="doubling")
+        with pytest.raises(TaskFailures):
+            run_tasks(_fail_on_three, [1, 3], label="failing")
+    lines = [r.getMessage() for r in caplog.records if r.name == "tiles.tasks"]
+    assert len(lines) == 2
+    assert lines[0].startswith("doubling: 3/3 tasks in ") and lines[1].startswith("failing: 2/2 tasks in ")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import zarr
 
-from tiles.store import tile_compressor
+from tiles.zarrio import tile_compressor
 from tiles.zarrio import CHUNK_KEY_ENCODING, array_files, write_array
 
 DTYPES = ["uint8", "int8", "uint16", "int16", "uint32", "int32", "int64", "uint64", "float32", "float64"]

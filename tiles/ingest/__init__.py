@@ -4,27 +4,10 @@
 refused before any work starts), plans *parts* (ranges of points a task reads,
 see each reader), reads and stages the parts as dask tasks through
 :class:`tiles.builder.StoreBuilder`, and publishes the store.  Points stored
-always equal points read: the count of every source is checked against its
-header where it has one.
-
-Several sources go into one store, in the order given (their points get
-consecutive ``point_index`` values):
-
-* **dimensions**: the store holds the union of the sources' dimensions; points
-  of a source that lacks one get 0 (ground-truth arrays: -1, class clutter).  A
-  dimension of the same name must have the same meaning in every source (same
-  LAS field or extra-bytes record), integer widths are widened.
-* **coordinates**: one grid for the store: the finest scale of all sources
-  (LAS sources' own scales; 0.1 mm, ``buildingparser.ingest.scale``, for text,
-  S3DIS and E57) and the first LAS source's offset (or a round offset near the
-  first point).  A LAS file on another grid is moved onto it exactly when its
-  scale is a whole multiple of the store's and the offsets differ by whole
-  steps, else rounded (the largest error is reported).
-* **LAS flavour**: ``meta.las`` keeps the first LAS source's header facts and
-  records; the export point format is that source's when it holds every
-  standard dimension of the store, else the smallest format that holds most
-  (the rest are written as extra bytes).  Sources with different CRSs are
-  refused.
+always equal points read.  Several sources go into one store, in the order
+given: the union of their dimensions, one coordinate grid (the finest scale,
+the first LAS source's offset), the first LAS source's flavour, one CRS.  The
+rules: docs/design/tiles.md, "Ingesting several sources".
 """
 from __future__ import annotations
 
@@ -34,13 +17,14 @@ import warnings
 from collections.abc import Sequence
 from typing import Any
 
-import dask
 import numpy as np
 
 from tiles import paths, scratch
 from tiles.builder import StoreBuilder
+from tiles.config import setting
 from tiles.errors import UserError
-from tiles.ingest._common import Quantization, Reader, complete_columns, is_dir, offset_near, union_dimensions
+from tiles.ingest.files import is_dir
+from tiles.ingest.reader import Quantization, Reader, complete_columns, offset_near, union_dimensions
 from tiles.schema import Part, Source
 from tiles.store import TileStore
 from tiles.tasks import run_tasks
@@ -52,7 +36,7 @@ __all__ = ["ingest", "open_sources", "precheck", "IngestReport"]
 
 def default_part_points() -> int:
     """Points per ingest task, ``buildingparser.ingest.part-points``."""
-    return int(dask.config.get("buildingparser.ingest.part-points", 2_000_000))
+    return setting("ingest.part-points")
 
 
 def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None = None) -> list[Reader]:
@@ -145,7 +129,7 @@ def _crs_key(c: dict[str, Any]):
 
 def merged_las(readers: list[Reader], dims) -> dict[str, Any] | None:
     """What export needs to write the LAS flavour back: the first LAS source's facts and the point format."""
-    from tiles.ingest.las import choose_point_format
+    from tiles.ingest.lasformat import choose_point_format
 
     facts = [r.las_facts() for r in readers if r.las_facts() is not None]
     if not facts:
@@ -215,26 +199,15 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
     The report (points, seconds, warnings) is in ``store.ingest_report``.
     """
     t0 = time.perf_counter()
-    if isinstance(sources, (str, os.PathLike)):
-        sources = [os.fspath(sources)]
-    sources = [os.fspath(s) for s in sources]
-    if not sources:
-        raise UserError(None, "no input given")
-    part_points = default_part_points() if part_points is None else part_points
-    if not isinstance(part_points, int) or isinstance(part_points, bool) or part_points < 1:
-        raise UserError(None, f"part size must be a positive number of points, not {part_points!r}")
+    sources = _source_list(sources)
+    part_points = _part_points(part_points)
     store = paths.normalize(store)
     if store in {paths.normalize(s) for s in sources}:
         raise UserError(store, "the store cannot be one of the inputs")
     if paths.exists(store, storage_options) and not overwrite:
         raise UserError(store, "already exists: choose another name or pass --overwrite")
     readers = open_sources(sources, storage_options)
-    space, inst = 0, 0
-    for r in readers:
-        if hasattr(r, "set_id_base"):
-            r.set_id_base(space, inst)
-            space += r.space_count
-            inst += r.instance_count
+    _number_ground_truth_ids(readers)
     dims = union_dimensions(readers)
     grid = choose_grid(readers)
     crs = merged_crs(readers)
@@ -242,29 +215,11 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
     builder = StoreBuilder.create(store, dimensions=dims, scale=list(grid.scale), offset=list(grid.offset),
                                   tile_size=tile_size, overwrite=overwrite, storage_options=storage_options)
     try:
-        items, owners, pid = [], [], 0
-        for si, r in enumerate(readers):
-            for spec in r.plan(part_points):
-                items.append((pid, r, spec))
-                owners.append(si)
-                pid += r.parts_of(spec)
+        items, owners = _plan_parts(readers, part_points)
         results = run_tasks(_stage, items, client=client, label="reading parts",
                             keys=[f"{os.path.basename(r.path)}#{k}" for k, (_, r, _) in enumerate(items)],
                             extra_args=(builder, grid))
-        summaries, parts = [], []
-        counts = [0] * len(readers)
-        stats: list[list[dict]] = [[] for _ in readers]
-        for si, res in zip(owners, results):
-            for summary, st in res:
-                stats[si].append(st)
-                if summary is None:
-                    continue
-                parts.append(Part(si, counts[si], summary.count))
-                counts[si] += summary.count
-                summaries.append(summary)
-        for r, n in zip(readers, counts):
-            if r.expected_count is not None and n != r.expected_count:
-                raise UserError(r.path, f"read {n:,} points but the header counts {r.expected_count:,}")
+        summaries, parts, counts, stats = _collect_parts(readers, owners, results)
         infos = [r.source_info(st) for r, st in zip(readers, stats)]
         srcs = [Source(r.path, r.format, n, info) for r, n, info in zip(readers, counts, infos)]
         docs = _ground_truth_docs(readers, stats, grid)
@@ -281,6 +236,66 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
                                         sources=len(readers), parts=len(parts), tiles=len(result.meta.tiles),
                                         warnings=notes)
     return result
+
+
+def _source_list(sources: Sequence[str] | str) -> list[str]:
+    """The sources as a list of paths (one path alone is a list of one); an error if there are none."""
+    if isinstance(sources, (str, os.PathLike)):
+        sources = [os.fspath(sources)]
+    sources = [os.fspath(s) for s in sources]
+    if not sources:
+        raise UserError(None, "no input given")
+    return sources
+
+
+def _part_points(part_points: int | None) -> int:
+    """Points per task: ``part_points`` or the setting; an error unless a positive integer."""
+    part_points = default_part_points() if part_points is None else part_points
+    if not isinstance(part_points, int) or isinstance(part_points, bool) or part_points < 1:
+        raise UserError(None, f"part size must be a positive number of points, not {part_points!r}")
+    return part_points
+
+
+def _number_ground_truth_ids(readers: list[Reader]) -> None:
+    """Number the spaces and instances of each source with ground truth after those of the sources before it."""
+    space, inst = 0, 0
+    for r in readers:
+        if hasattr(r, "set_id_base"):
+            r.set_id_base(space, inst)
+            space += r.space_count
+            inst += r.instance_count
+
+
+def _plan_parts(readers: list[Reader], part_points: int) -> tuple[list[tuple[int, Reader, Any]], list[int]]:
+    """The tasks ``(first part id, reader, spec)`` of every source in order, and the source of each task."""
+    items, owners, pid = [], [], 0
+    for si, r in enumerate(readers):
+        for spec in r.plan(part_points):
+            items.append((pid, r, spec))
+            owners.append(si)
+            pid += r.parts_of(spec)
+    return items, owners
+
+
+def _collect_parts(readers: list[Reader], owners: list[int], results: list) -> tuple[list, list[Part], list[int],
+                                                                                       list[list[dict]]]:
+    """The tasks' results gathered: the part summaries, the parts, the points and the stats of each source;
+    an error where a source gave other than its header's count."""
+    summaries, parts = [], []
+    counts = [0] * len(readers)
+    stats: list[list[dict]] = [[] for _ in readers]
+    for si, res in zip(owners, results):
+        for summary, st in res:
+            stats[si].append(st)
+            if summary is None:
+                continue
+            parts.append(Part(si, counts[si], summary.count))
+            counts[si] += summary.count
+            summaries.append(summary)
+    for r, n in zip(readers, counts):
+        if r.expected_count is not None and n != r.expected_count:
+            raise UserError(r.path, f"read {n:,} points but the header counts {r.expected_count:,}")
+    return summaries, parts, counts, stats
 
 
 def _ground_truth_docs(readers, stats, grid) -> dict[str, Any]:

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from tiles.errors import UserError
-from tiles.ingest._common import PartResult, Quantization, Reader, check_file, local_copy
+from tiles.ingest.files import check_file, local_copy
+from tiles.ingest.reader import PartResult, Quantization, Reader
 from tiles.ingest.text import color_dimensions
 from tiles.schema import Dimension, coordinate_dimensions
 

@@ -1,34 +1,11 @@
 """The raw S3DIS layout: ``Area_N/<room>/Annotations/<class>_<i>.txt``, rooms as ground-truth spaces.
 
-Accepted: an area folder (``Area_N/`` holding room folders), a folder of areas,
-or a single room folder.  A folder is a room when it has an ``Annotations/``
-sub-folder.  Rooms are taken in natural order (``office_2`` before
-``office_10``), and inside a room the annotation files in natural order.
-
-**Which points are the input.**  In S3DIS the room file ``<room>/<room>.txt``
-is the concatenation of the room's annotation files (the sample's room file
-and annotation files hold exactly the same lines, in another order), so the
-points are read once, from the annotation files: each annotation file is one
-element instance with one class, and "points in = points stored" counts the
-point lines of the annotation files.  The room file is only read to count its
-lines (``buildingparser.ingest.s3dis.check-room-files``): a room whose room file
-has a different number of point lines than its annotations gets a warning.  A
-room without annotation files is read from its room file, as clutter with no
-instance.  The room file is whichever ``.txt`` lies directly in the room folder
-(``copy_Room_1.txt`` in ``copyRoom_1/`` is fine).
-
-**Labels.**  ``gt_space`` numbers the rooms, ``gt_instance`` the annotation
-files, ``gt_class`` is the class code of the file's class name; names outside
-the 13 classes (``stairs``) are clutter (counted in the source info).  A
-duplicated annotation file such as ``wall_3 (1).txt`` is skipped when it is
-byte-identical to ``wall_3.txt`` (counted, with its lines) and read as one
-more instance otherwise.  Damaged lines are repaired or skipped and counted as
-described in :mod:`tiles.ingest.text`.
-
-**Ground truth document.**  Spaces: id, room name, type (the name without its
-``_<n>`` suffix: ``office``, ``hallway``, ``conferenceRoom``...), floor 0, the
-XY convex hull of the room's points as footprint, and its z range.  Elements:
-one per annotation file, the tight axis-aligned box of its points (yaw 0).
+Accepted: an area folder, a folder of areas, or a single room folder (a folder
+with an ``Annotations/`` sub-folder), in natural order.  The points are read
+once, from the annotation files (one element instance, one class each); room
+files are only counted, and read as clutter for a room without annotations.
+Which points are the input, the labels and the ground-truth document:
+docs/design/tiles.md, "The raw S3DIS layout".
 """
 from __future__ import annotations
 
@@ -38,16 +15,18 @@ from collections import defaultdict
 from collections.abc import Iterator
 from typing import Any
 
-import dask
 import numpy as np
 
 from tiles import paths
 from tiles.classes import CLASS_CODES, CLASS_NAMES, CLUTTER
+from tiles.config import setting
 from tiles.errors import UserError
 from tiles.groundtruth import GTElement, GTSpace, gt_dimensions
-from tiles.ingest._common import PartResult, Quantization, Reader, is_dir, listdir, open_binary
-from tiles.ingest.text import (BlockStats, Sniff, bad_line_policy, color_dimensions, defect_warnings, line_number,
-                               parse_lines, points_columns, read_lines_block, sniff)
+from tiles.ingest.files import file_size, is_dir, listdir, open_binary
+from tiles.ingest.reader import PartResult, Quantization, Reader
+from tiles.ingest.lines import BlockStats
+from tiles.ingest.text import (Sniff, bad_line_policy, color_dimensions, defect_warnings, line_number, parse_lines,
+                               points_columns, read_lines_block, sniff)
 from tiles.schema import coordinate_dimensions
 
 _ANNOTATION = re.compile(r"^(?P<cls>.+?)_(?P<num>\d+)(?P<dup> \(\d+\))?\.txt$")
@@ -126,7 +105,7 @@ class S3DISReader(Reader):
         self.area_name = area.rstrip("/").rsplit("/", 1)[-1]
         self.dimensions = coordinate_dimensions() + color_dimensions() + gt_dimensions()
         self.policy = bad_line_policy()
-        self.check_rooms = bool(dask.config.get("buildingparser.ingest.s3dis.check-room-files", True))
+        self.check_rooms = setting("ingest.s3dis.check-room-files")
         self.space_base = 0
         self.instance_base = 0
         #: per room: name, room file (or None), [(path, size, class name, class code)]
@@ -172,8 +151,6 @@ class S3DISReader(Reader):
         self.space_count = len(self.rooms)
 
     def _size(self, p: str) -> int:
-        from tiles.ingest._common import file_size
-
         return file_size(p, self.storage_options)
 
     def set_id_base(self, space: int, instance: int) -> None:
@@ -189,8 +166,6 @@ class S3DISReader(Reader):
         for k, room in enumerate(self.rooms):
             space = self.space_base + k
             if not room["files"] and room["room_file"]:
-                from tiles.ingest._common import file_size
-
                 size = file_size(room["room_file"], self.storage_options)
                 for s in range(0, max(size, 1), step):
                     yield (room["room_file"], size, s, min(s + step, size), space, -1, CLUTTER)

@@ -53,7 +53,7 @@ def test_cli_hard_adds_the_difficulties_asked_for(tmp_path, client, capsys):
 def test_cli_training_yaw_gives_the_building_train_generates(tmp_path, client, monkeypatch):
     """``--training-yaw`` (what ``make model`` uses for its stores) passes train's seeded yaw to the generator."""
     import engine.synth as synth
-    from engine.training.train import synthetic_yaw
+    from engine.training.synthetic import synthetic_yaw
 
     seen = []
     real = synth.generate

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from engine.cli import main
-from engine.cli.train_crf import check_not_detector_data
-from engine.crf.model import CRFWeights, apply_crf
+from engine.crf.apply import apply_crf
+from engine.crf.model import CRFWeights
+from engine.crf.workflow import check_not_detector_data
 from engine.detection.detect import detect
 from engine.detection.model import Model
 from engine.synth import generate

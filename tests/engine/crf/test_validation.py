@@ -4,11 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.crf.model import CRFSettings, CRFWeights, N_CLASSES
+from engine.crf.labels import proposal_labels
+from engine.crf.model import N_CLASSES, CRFSettings, CRFWeights
 from engine.crf.scenes import make_scenes
+from engine.crf.ssvm import train_crf
 from engine.crf.validation import MARGIN, choose, gate, set_ap
 from engine.detection.proposals import Proposal
-from engine.crf.ssvm import proposal_labels, train_crf
 from tiles.classes import CLASS_CODES
 
 K = 2

@@ -130,7 +130,8 @@ def test_largest_spaces_are_submitted_first_with_the_same_proposals(buildings, t
 
 
 def test_training_again_on_the_same_data_writes_the_same_model(buildings, client, tmp_path):
-    from engine.training.train import TrainSettings, train
+    from engine.training.settings import TrainSettings
+    from engine.training.train import train
 
     _, stores = buildings
     settings = TrainSettings.from_config(classes=(0,), rounds=0)

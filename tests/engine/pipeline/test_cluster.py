@@ -7,8 +7,9 @@ import types
 import dask
 import pytest
 
-from engine.pipeline import cluster
 from engine.cli import main
+from engine.pipeline import cluster
+from tests.engine.pipeline.logged import logged
 from tiles.errors import UserError
 
 
@@ -27,13 +28,12 @@ def _one_task(client):
     return client.submit(lambda x: x + 1, 41, pure=False).result()
 
 
-def test_existing_scheduler_by_flag_env_and_config(client, capsys, monkeypatch):
+def test_existing_scheduler_by_flag_env_and_config(client, monkeypatch):
     address = client.scheduler.address
-    with cluster.cluster_client(address) as c:
+    with logged("engine.pipeline.cluster") as lines, cluster.cluster_client(address) as c:
         assert _one_task(c) == 42
         assert not cluster.is_remote(c)
-    err = capsys.readouterr().err
-    assert f"dask: {address}; dashboard: http" in err
+    assert f"dask: {address}; dashboard: http" in "\n".join(lines)
     monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", address)
     with dask.config.set({"scheduler-address": None}), cluster.cluster_client(quiet=True) as c:
         assert c.scheduler.address == address
@@ -50,15 +50,16 @@ def test_unreachable_scheduler_is_a_clear_error():
                 pass
 
 
-def test_embedded_local_cluster(capsys):
+def test_embedded_local_cluster():
     with dask.config.set({"scheduler-address": None, "buildingparser.scheduler": None}), \
+            logged("engine.pipeline.cluster") as lines, \
             cluster.cluster_client(n_workers=1, memory_limit="1GiB") as c:
         assert len(c.scheduler_info()["workers"]) == 1
         assert _one_task(c) == 42
-    assert "dask: local cluster, 1 workers; dashboard: http" in capsys.readouterr().err
+    assert "dask: local cluster, 1 workers; dashboard: http" in "\n".join(lines)
 
 
-def test_tls_scheduler_with_dasks_own_security_settings(capsys):
+def test_tls_scheduler_with_dasks_own_security_settings():
     from distributed import LocalCluster
     from distributed.security import Security
 
@@ -74,9 +75,10 @@ def test_tls_scheduler_with_dasks_own_security_settings(capsys):
                     "distributed.comm.tls.client.cert": sec.tls_client_cert,
                     "distributed.comm.tls.client.key": sec.tls_client_key,
                     "distributed.comm.require-encryption": True}
-        with dask.config.set(settings), cluster.cluster_client(address) as c:
+        with dask.config.set(settings), logged("engine.pipeline.cluster") as lines, \
+                cluster.cluster_client(address) as c:
             assert _one_task(c) == 42
-    assert f"dask: {address}" in capsys.readouterr().err
+    assert f"dask: {address}" in "\n".join(lines)
 
 
 def _fake_client(address):
@@ -173,7 +175,7 @@ def test_embedded_cluster_and_run_pin_library_pools(tmp_path, monkeypatch):
         assert next(iter(c.run(_pools).values()))["rayon"] == "1"
     seen = []
     monkeypatch.setattr(pipeline, "pin_library_threads", seen.append)
-    monkeypatch.setattr(pipeline, "_withdraw_report", lambda out, opt: (_ for _ in ()).throw(RuntimeError("stop")))
+    monkeypatch.setattr(pipeline, "withdraw_report", lambda out, options: (_ for _ in ()).throw(RuntimeError("stop")))
     with pytest.raises(RuntimeError, match="stop"):
         pipeline.run(str(tmp_path / "in.laz"), str(tmp_path / "out"), client="a client")
     assert seen == ["a client"]

@@ -3,17 +3,19 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import laspy
 import numpy as np
 import pytest
 
-from engine.pipeline import run as pipeline
 from engine.cli import main
 from engine.detection.model import Model
+from engine.pipeline import results
 from engine.pipeline.run import RunSettings, run
 from engine.pipeline.stages import StageLog
 from engine.synth import generate
+from tests.engine.pipeline.logged import logged
 from tiles.store import open_store
 from tiles.tasks import TaskFailures
 
@@ -33,8 +35,8 @@ def building(tmp_path_factory, structural_model):
 def first_run(building, client):
     root, laz, model = building
     out = root / "out"
-    lines = []
-    metrics = run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lines.append))
+    with logged("engine.pipeline.run") as lines:
+        metrics = run(str(laz), str(out), client=client, options=RunSettings(model=model))
     return out, metrics, lines
 
 
@@ -87,16 +89,17 @@ def test_metrics_score_the_ground_truth_and_match_the_report(first_run):
 
 def test_summary_names_the_results(first_run):
     out, metrics, lines = first_run
-    text = "\n".join(pipeline.summary_lines(metrics, str(out)))
+    text = "\n".join(results.summary_lines(metrics, str(out)))
     assert "ARI" in text and "mAP" in text and str(out / "report.html") in text
-    assert any("spaces:" in ln for ln in lines)  # progress of the stages was said
+    assert any(ln.startswith("spaces: ") for ln in lines)  # one line per stage was logged
+    assert any(ln.startswith("detection: ") and ln.endswith(" s)") for ln in lines)
 
 
 def test_rerun_skips_finished_stages_and_gives_the_same_outputs(building, first_run, client):
     root, laz, model = building
     out, metrics, _ = first_run
     before = {n: (out / n).read_bytes() for n in ("elements.json", "spaces.geojson")}
-    again = run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+    again = run(str(laz), str(out), client=client, options=RunSettings(model=model))
     assert {"ingest", "spaces", "detection", "crf", "space_update", "labels", "export"} <= set(again["skipped"])
     assert again["spaces"] == metrics["spaces"] and again["detection"]["ap"] == metrics["detection"]["ap"]
     for n, b in before.items():
@@ -108,7 +111,7 @@ def test_forced_run_is_deterministic(building, first_run, client, tmp_path):
     out, metrics, _ = first_run
     other = tmp_path / "again"
     again = run(str(laz), str(other), client=client,
-                options=RunSettings(model=model, force=True, say=lambda s: None, export_points=False))
+                options=RunSettings(model=model, force=True, export_points=False))
     assert again["skipped"] == []
     assert again["spaces"] == metrics["spaces"]
     assert again["detection"]["ap"] == metrics["detection"]["ap"]
@@ -130,7 +133,7 @@ def test_a_failing_space_is_reported_recorded_and_leaves_no_report(building, mon
     monkeypatch.setattr(det, "_detect_task", flaky)
     out = tmp_path / "failed"
     with pytest.raises(TaskFailures) as err:
-        run(str(laz), str(out), options=RunSettings(model=model, say=lambda s: None))
+        run(str(laz), str(out), options=RunSettings(model=model))
     assert "simulated worker fault" in str(err.value)
     assert not (out / "report.html").exists() and not (out / "metrics.json").exists()
     log = StageLog(open_store(str(out / "store.zarr")))
@@ -139,13 +142,13 @@ def test_a_failing_space_is_reported_recorded_and_leaves_no_report(building, mon
     assert log.get("spaces").status == "ok"  # finished stages are kept for the next run
     # the next run redoes the failed stage (and only what depends on it)
     monkeypatch.setattr(det, "_detect_task", real)
-    metrics = run(str(laz), str(out), options=RunSettings(model=model, say=lambda s: None, export_points=False))
+    metrics = run(str(laz), str(out), options=RunSettings(model=model, export_points=False))
     assert "spaces" in metrics["skipped"] and "detection" not in metrics["skipped"]
     assert (out / "report.html").is_file()
     # a later run that fails withdraws the earlier report: the folder no longer looks complete
     monkeypatch.setattr(det, "_detect_task", flaky)
     with pytest.raises(TaskFailures):
-        run(str(laz), str(out), options=RunSettings(model=model, say=lambda s: None, force=True))
+        run(str(laz), str(out), options=RunSettings(model=model, force=True))
     assert not (out / "report.html").exists()
 
 
@@ -157,7 +160,7 @@ def test_export_runs_beside_the_metrics_and_its_failure_is_the_runs(building, cl
     import tiles.export as ex
 
     threads = {}
-    real_export, real_metrics = ex.export, pl._metrics
+    real_export, real_metrics = ex.export, pl.compute_metrics
 
     def broken_export(*a, **kw):
         import threading
@@ -172,10 +175,10 @@ def test_export_runs_beside_the_metrics_and_its_failure_is_the_runs(building, cl
         return real_metrics(*a, **kw)
 
     monkeypatch.setattr(ex, "export", broken_export)
-    monkeypatch.setattr(pl, "_metrics", metrics_here)
+    monkeypatch.setattr(pl, "compute_metrics", metrics_here)
     out = tmp_path / "export-fails"
     with pytest.raises(TaskFailures, match="simulated disk full"):
-        run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+        run(str(laz), str(out), client=client, options=RunSettings(model=model))
     assert threads["export"].startswith("buildingparser-export") and threads["metrics"] != threads["export"]
     assert not (out / "report.html").exists() and not (out / "points.laz").exists()
     log = StageLog(open_store(str(out / "store.zarr")))
@@ -184,13 +187,13 @@ def test_export_runs_beside_the_metrics_and_its_failure_is_the_runs(building, cl
     def broken_metrics(*a, **kw):
         raise ValueError("simulated metrics bug")
 
-    monkeypatch.setattr(pl, "_metrics", broken_metrics)
+    monkeypatch.setattr(pl, "compute_metrics", broken_metrics)
     with pytest.raises(ValueError, match="simulated metrics bug"):
-        run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+        run(str(laz), str(out), client=client, options=RunSettings(model=model))
     assert not (out / "report.html").exists()
     monkeypatch.setattr(ex, "export", real_export)
-    monkeypatch.setattr(pl, "_metrics", real_metrics)
-    metrics = run(str(laz), str(out), client=client, options=RunSettings(model=model, say=lambda s: None))
+    monkeypatch.setattr(pl, "compute_metrics", real_metrics)
+    metrics = run(str(laz), str(out), client=client, options=RunSettings(model=model))
     assert "export" not in metrics["skipped"] and metrics["timings"]["export"] > 0
     assert (out / "points.laz").is_file() and (out / "report.html").is_file()
 
@@ -210,6 +213,35 @@ def test_cli_run_and_its_errors(building, client, tmp_path, capsys):
     assert rc == 2 and "nope" in err and "Traceback" not in err
     assert Model.load(model) is not None
     assert os.path.isfile(model + ".npz")
+
+
+def test_cli_run_logs_a_line_per_stage_and_keeps_every_message_in_the_output_folder(building, first_run, client,
+                                                                                    capsys):
+    """``run`` shows one line per stage on stderr (none with -q) and writes buildingparser.log (DEBUG, timestamps)
+    into the output folder; a failed run's log ends with the error and its traceback."""
+    _, laz, model = building
+    out, _, _ = first_run
+    args = ["run", str(laz), "--out", str(out), "--model", model, "--scheduler", client.scheduler.address]
+    assert main(args) == 0  # every stage done before: skipped
+    got = capsys.readouterr()
+    err = got.err.splitlines()
+    assert "buildingparser: spaces: " in got.err and "(done before, skipped)" in got.err
+    assert all(line.startswith("buildingparser: ") for line in err), err
+    assert not any("tasks in" in line for line in err)  # DEBUG lines stay out of stderr
+    assert "ARI" in got.out  # the summary is the command's output
+    log = (out / "buildingparser.log").read_text()
+    assert re.search(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} INFO +engine\.pipeline\.run: spaces: ", log, re.M), log
+    assert re.search(r" DEBUG +tiles\.tasks: .*: \d+/\d+ tasks in ", log), log
+    assert main([*args, "-q"]) == 0
+    got = capsys.readouterr()
+    assert got.err == "" and "ARI" in got.out
+    assert "engine.pipeline.run: spaces: " in (out / "buildingparser.log").read_text()  # the file keeps them
+    failed = out.parent / "no-such-input-out"
+    assert main(["run", str(out.parent / "nope.laz"), "--out", str(failed), "--model", model,
+                 "--scheduler", client.scheduler.address]) == 2
+    log = (failed / "buildingparser.log").read_text()
+    assert "ERROR" in log and "nope.laz" in log and "Traceback" in log
+    assert "Traceback" not in capsys.readouterr().err
 
 
 def test_killing_a_worker_mid_run_changes_nothing(building, first_run, tmp_path):
@@ -242,7 +274,7 @@ def test_killing_a_worker_mid_run_changes_nothing(building, first_run, tmp_path)
         watcher.start()
         try:
             again = run(str(laz), str(tmp_path / "killed"), client=cl,
-                        options=RunSettings(model=model, say=lambda s: None))
+                        options=RunSettings(model=model))
         finally:
             done.set()
             watcher.join()
@@ -269,11 +301,11 @@ def test_run_with_crf_weights_keeps_a_subset_and_scores_the_ranking(building, cl
     assert rc == 0
     out = tmp_path / "out"
     metrics = run(str(laz), str(out), client=client,
-                  options=RunSettings(model=crf_model, say=lambda s: None, export_points=False))
+                  options=RunSettings(model=crf_model, export_points=False))
     det, crf = metrics["detection"], metrics["crf"]
     assert crf["spaces"] >= 1 and sum(crf["status"].values()) == crf["spaces"]
     assert crf["kept"] <= crf["proposals"] and sum(metrics["elements"].values()) == crf["kept"]
     assert det["map_crf_ranked"] is not None and 0.0 <= det["map_crf_ranked"] <= 1.0
     assert not (out / "points.laz").exists()
-    text = "\n".join(pipeline.summary_lines(metrics, str(out)))
+    text = "\n".join(results.summary_lines(metrics, str(out)))
     assert "contextual score" in text and "points.laz" not in text

@@ -6,10 +6,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from engine.training.ablation import check_compatible, detect_many
 from engine.detection.detect import detect
 from engine.detection.features import ABLATIONS
-from engine.training.train import TrainSettings, refit_without, train_with_samples
+from engine.training.ablation import check_compatible, detect_many
+from engine.training.settings import TrainSettings
+from engine.training.svm import refit_without
+from engine.training.train import train_with_samples
 from tests.engine.handmade import generated_stores
 
 

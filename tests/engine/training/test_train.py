@@ -6,7 +6,9 @@ import pytest
 
 from engine.detection.features import ABLATIONS, FeatureLayout
 from engine.synth import generate
-from engine.training.train import TrainSettings, refit_without, train, train_with_samples
+from engine.training.settings import TrainSettings
+from engine.training.svm import refit_without
+from engine.training.train import train, train_with_samples
 from tiles.store import open_store
 
 
@@ -51,8 +53,10 @@ def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained
 
     _, settings, model, _ = trained
     shipped = load_model(None).svm["settings"]
-    assert (settings.relative_ratio, settings.mining) == (shipped["relative_ratio"], shipped["mining"]) == (0.5, "hardest")
-    assert (settings.atom_weights, settings.atom_scale) == (shipped["atom_weights"], shipped["atom_scale"]) == (True, 0.5)
+    assert (settings.relative_ratio, settings.mining) == (shipped["relative_ratio"], shipped["mining"]) \
+        == (0.5, "hardest")
+    assert (settings.atom_weights, settings.atom_scale) == (shipped["atom_weights"], shipped["atom_scale"]) \
+        == (True, 0.5)
     assert load_model(None).atom_weights is not None
     # per-class feature groups validated on folds, and the learned box regression: the shipped model has both
     assert (settings.select_groups, settings.box_fit, settings.group_classes) == (
@@ -78,19 +82,20 @@ def test_hardest_mining_takes_the_highest_scoring_fresh_violators(trained):
     import dataclasses
 
     from engine.detection.detect import DetectionSettings
-    from engine.training.train import _instances_task, _samples_task, training_jobs
+    from engine.training.jobs import instances_task, training_jobs
+    from engine.training.samples import samples_task
 
     store, settings, model, _ = trained
     det = DetectionSettings.from_config()
     det = dataclasses.replace(det, max_stride=max(det.max_stride, settings.max_stride))
     jobs = training_jobs([store])
     job = max(jobs, key=lambda j: j.ref.count)
-    job = dataclasses.replace(job, frame=_instances_task(job, settings)["frame"])
+    job = dataclasses.replace(job, frame=instances_task(job, settings)["frame"])
     n = 15
     out = {}
     for mining in ("random", "hardest"):
         s = dataclasses.replace(settings, mining=mining, hard_negatives=n)
-        out[mining] = _samples_task(job, model, s, 1, det, (0, 1, 2))
+        out[mining] = samples_task(job, model, s, 1, det, (0, 1, 2))
     for c in (0, 1, 2):
         score = {}
         for m in out:  # each negative scored with its window's weights (the class's plus the window's own)
@@ -103,53 +108,11 @@ def test_hardest_mining_takes_the_highest_scoring_fresh_violators(trained):
     # a violator already in the training set is passed over for the next one down
     c = 2
     mined = dataclasses.replace(job, mined={c: out["hardest"][c]["keys"][:5]})
-    again = _samples_task(mined, model, dataclasses.replace(settings, mining="hardest", hard_negatives=n), 1, det,
-                          (c,))[c]["keys"]
+    again = samples_task(mined, model, dataclasses.replace(settings, mining="hardest", hard_negatives=n), 1, det,
+                         (c,))[c]["keys"]
     assert not np.isin(out["hardest"][c]["keys"][:5], again).any() and len(again) == n
     with pytest.raises(ValueError):
         TrainSettings(mining="best")
-
-
-def test_atom_design_puts_each_row_in_its_windows_block():
-    from engine.training.train import _atom_design
-
-    x = np.arange(12, dtype=np.float64).reshape(4, 3) + 1
-    atom = np.array([7, -1, 3, 7])
-    ids = np.array([3, 7])
-    dense = _atom_design(x, atom, ids, 2.0).toarray()
-    assert dense.shape == (4, 3 + 2 * 4)
-    np.testing.assert_array_equal(dense[:, :3], x)
-    np.testing.assert_array_equal(dense[0, 3:], [0, 0, 0, 0, *(2 * x[0]), 2])  # atom 7: second block
-    np.testing.assert_array_equal(dense[1, 3:], 0)  # no window: shared part only
-    np.testing.assert_array_equal(dense[2, 3:], [*(2 * x[2]), 2, 0, 0, 0, 0])
-
-
-def test_windows_own_weights_separate_what_shared_weights_cannot():
-    """Two windows of one class whose positives lie on opposite sides of a feature: one shared linear SVM
-    cannot rank both, the class's SVM with each window's own part does."""
-    from engine.training.train import _fit_svm
-
-    rng = np.random.default_rng(0)
-    n = 200
-    f = rng.uniform(0.2, 1.0, n)
-    x = np.column_stack([np.concatenate([f, -f, -f, f]), rng.normal(size=(4 * n, 2))])
-    # atom 0: positives f > 0, negatives f < 0; atom 5: the other way round
-    pos = np.concatenate([x[:n], x[n:2 * n]])
-    neg = np.concatenate([x[2 * n:3 * n], x[3 * n:]])
-    pos_atom = np.repeat([0, 5], n)
-    neg_atom = np.repeat([0, 5], n)
-    mask = np.ones(3, dtype=bool)
-    shared = _fit_svm(pos, neg, mask, 1.0, 0)
-    s_pos, s_neg = pos @ shared.weights + shared.bias, neg @ shared.weights + shared.bias
-    assert np.mean(s_pos > 0) + np.mean(s_neg < 0) < 1.3  # about chance
-    fit = _fit_svm(pos, neg, mask, 1.0, 0, (pos_atom, neg_atom))
-    assert set(fit.atom_weights) == {0, 5}
-
-    def score(v, a):
-        return v @ (fit.weights + fit.atom_weights[a]) + fit.bias + fit.atom_bias[a]
-
-    assert np.all(score(pos[:n], 0) > 0) and np.all(score(neg[:n], 0) < 0)
-    assert np.all(score(pos[n:], 5) > 0) and np.all(score(neg[n:], 5) < 0)
 
 
 def test_training_with_windows_own_weights_scores_with_them(trained):

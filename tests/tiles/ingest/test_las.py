@@ -11,7 +11,7 @@ import pytest
 from tiles.errors import UserError
 from tiles.export import export, gather_points
 from tiles.ingest import ingest
-from tiles.ingest.las import LasReader, choose_point_format
+from tiles.ingest.las import LasReader
 
 SAMPLES_DIR = pathlib.Path(__file__).resolve().parents[3].parent / "shared" / "data" / "las-samples"
 SAMPLES = sorted(p.relative_to(SAMPLES_DIR).as_posix() for p in SAMPLES_DIR.glob("*/*.la[sz]")) \
@@ -206,13 +206,6 @@ def test_laz_without_chunk_table_is_decoded_in_order_by_one_task(tmp_path, monke
     s = ingest([str(tmp_path / "a.laz")], str(tmp_path / "s.zarr"), part_points=1000)
     assert [p.count for p in s.meta.parts] == [1000, 1000, 500]
     np.testing.assert_array_equal(gather_points(s, ["x"])["x"], las.X)
-
-
-def test_choose_point_format():
-    assert choose_point_format(3, {"intensity", "red"}) == 3
-    assert choose_point_format(1, {"intensity", "red", "gps_time"}) == 3
-    assert choose_point_format(None, {"red"}) == 7
-    assert choose_point_format(6, {"nir"}) == 8
 
 
 def test_export_of_samples_is_identical_point_for_point(shared_data, tmp_path):

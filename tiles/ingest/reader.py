@@ -1,28 +1,23 @@
-"""What every input reader shares: the reader interface, quantisation to the store's grid, file access.
+"""What every input reader shares: the reader interface, its parts, the store's grid, the store's dimensions.
 
 A *reader* describes one source (a LAS file, a text file, an S3DIS area, an E57
 file).  It is built on the driver, where it checks the source and learns its
 dimensions, then sent to the workers inside each part's task: it must stay
-small when pickled (paths and header facts, never point data).
+small when pickled (paths and header facts, never point data).  File access is
+in :mod:`tiles.ingest.files`.
 """
 from __future__ import annotations
 
-import contextlib
-import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from collections.abc import Callable
-from typing import Any, BinaryIO
+from typing import Any
 
-import fsspec
 import numpy as np
 
-from tiles import paths
 from tiles.errors import UserError
+from tiles.groundtruth import gt_dimensions
 from tiles.schema import GT_DTYPES, Dimension
 
-#: Scale of the coordinates of sources that have none (text, S3DIS, E57): 0.1 mm.
-DEFAULT_SCALE = 1e-4
 #: Dimensions whose values are fixed by the store or the pipeline: a source field of that name is renamed.
 RESERVED_NAMES = frozenset({"x", "y", "z", "point_index", "part_offsets", "cell_id", "space_id",
                             "classification", "element_id"})
@@ -157,77 +152,6 @@ class Reader:
         return []
 
 
-# -- files --------------------------------------------------------------------------------
-
-def open_binary(path: str, storage_options: dict[str, Any] | None = None) -> BinaryIO:
-    """A seekable binary file object for a local path or an fsspec URL."""
-    if paths.is_local(path):
-        return open(paths.local_path(path), "rb")  # noqa: SIM115 - caller closes
-    return fsspec.open(path, "rb", **(storage_options or {})).open()
-
-
-def file_size(path: str, storage_options: dict[str, Any] | None = None) -> int:
-    if paths.is_local(path):
-        return os.path.getsize(paths.local_path(path))
-    fs, p = paths.filesystem(path, storage_options)
-    return int(fs.size(p))
-
-
-def check_file(path: str, storage_options: dict[str, Any] | None = None) -> None:
-    """A clear error unless ``path`` is an existing, readable file."""
-    if paths.is_local(path):
-        p = paths.local_path(path)
-        if not os.path.exists(p):
-            raise UserError(path, "no such file")
-        if os.path.isdir(p):
-            raise UserError(path, "is a directory, expected a point cloud file")
-        if not os.access(p, os.R_OK):
-            raise UserError(path, "cannot be read (permission denied)")
-        return
-    fs, p = paths.filesystem(path, storage_options)
-    try:
-        info = fs.info(p)
-    except FileNotFoundError:
-        raise UserError(path, "no such file") from None
-    if info.get("type") == "directory":
-        raise UserError(path, "is a directory, expected a point cloud file")
-
-
-def is_dir(path: str, storage_options: dict[str, Any] | None = None) -> bool:
-    if paths.is_local(path):
-        return os.path.isdir(paths.local_path(path))
-    fs, p = paths.filesystem(path, storage_options)
-    return bool(fs.isdir(p))
-
-
-def listdir(path: str, storage_options: dict[str, Any] | None = None) -> list[tuple[str, bool]]:
-    """``(name, is_dir)`` of the entries of a folder, sorted by name."""
-    if paths.is_local(path):
-        p = paths.local_path(path)
-        return sorted((e.name, e.is_dir()) for e in os.scandir(p))
-    fs, p = paths.filesystem(path, storage_options)
-    out = []
-    for info in fs.ls(p, detail=True):
-        name = info["name"].rstrip("/").rsplit("/", 1)[-1]
-        out.append((name, info.get("type") == "directory"))
-    return sorted(out)
-
-
-@contextlib.contextmanager
-def local_copy(path: str, storage_options: dict[str, Any] | None = None) -> Iterator[str]:
-    """A local file path for libraries that cannot read URLs (E57): the path itself or a temporary copy."""
-    if paths.is_local(path):
-        yield paths.local_path(path)
-        return
-    import tempfile
-
-    fs, p = paths.filesystem(path, storage_options)
-    with tempfile.TemporaryDirectory(prefix="buildingparser-") as d:
-        local = os.path.join(d, os.path.basename(p) or "source")
-        fs.get(p, local)
-        yield local
-
-
 # -- dimensions -----------------------------------------------------------------------------
 
 def safe_name(name: str, taken: set[str]) -> str:
@@ -275,6 +199,7 @@ def _describe(d: Dimension) -> str:
 
 
 def fill_value(name: str) -> int:
+    """The value of dimension ``name`` for points of a source that lacks it (see :data:`FILL_VALUES`)."""
     return FILL_VALUES.get(name, 0)
 
 
@@ -289,12 +214,12 @@ def complete_columns(columns: dict[str, np.ndarray], dims: list[Dimension], n: i
 
 
 def gt_dimension(name: str) -> Dimension:
-    from tiles.groundtruth import gt_dimensions
-
+    """The store's ground-truth dimension ``name`` (``gt_space``, ``gt_class`` or ``gt_instance``)."""
     return next(d for d in gt_dimensions() if d.name == name)
 
 
 def is_gt_name(name: str) -> bool:
+    """True for the name of a ground-truth array."""
     return name in GT_DTYPES
 
 

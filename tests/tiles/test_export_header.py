@@ -1,0 +1,43 @@
+"""tiles.export_header: the header statistics of export units add up to laspy's for the whole cloud."""
+from __future__ import annotations
+
+import laspy
+import numpy as np
+
+from tiles.export_header import UnitStats, grow_header, set_extra_ranges, tracked_extra_bytes, unit_stats
+
+
+def test_header_statistics_of_units_add_up_to_those_of_the_whole(tmp_path):
+    pf = laspy.PointFormat(6)
+    pf.add_extra_dimension(laspy.ExtraBytesParams("temp", "int16", no_data=[-1]))
+    pf.add_extra_dimension(laspy.ExtraBytesParams("pair", "2float64"))
+    header = laspy.LasHeader(version="1.4", point_format=pf)
+    rng = np.random.default_rng(2)
+    rec = laspy.PackedPointRecord.zeros(1000, pf)
+    rec.X, rec.Y, rec.Z = rng.integers(-5000, 5000, (3, 1000))
+    rec.gps_time = rng.uniform(0, 1, 1000)
+    rec.return_number = rng.integers(0, 16, 1000)
+    temp = rng.integers(0, 300, 1000)
+    temp[::3] = -1  # no data: not in the range
+    temp[0] = -1
+    rec["temp"] = temp
+    pair = rng.normal(0, 1, (1000, 2))
+    rec["pair"] = pair
+    want = header.copy()
+    want.partial_reset()
+    want.grow(rec)
+    got = header.copy()
+    got.partial_reset()
+    tracked = tracked_extra_bytes(got)
+    assert tracked == [("temp", [-1]), ("pair", None)]
+    extra: list = [None] * len(tracked)
+    for part in (slice(0, 1), slice(1, 300), slice(300, 1000)):  # the first unit has no valid temp
+        grow_header(got, unit_stats(rec.array[part], pf, tracked), extra)
+    set_extra_ranges(got, tracked, extra)
+    for attr in ("mins", "maxs", "min_gps_time", "max_gps_time", "number_of_points_by_return", "point_count"):
+        np.testing.assert_array_equal(getattr(got, attr), getattr(want, attr), err_msg=attr)
+    t, p = got.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs
+    assert (t.min[0], t.max[0]) == (temp[temp >= 0].min(), temp.max())
+    np.testing.assert_array_equal(p.min, pair.min(axis=0))
+    np.testing.assert_array_equal(p.max, pair.max(axis=0))
+    assert isinstance(unit_stats(rec.array[:0], pf, tracked), UnitStats)

@@ -1,0 +1,151 @@
+"""Where every store array goes in the exported LAS point records, and packing a part's columns into them.
+
+The point format is the source's (``meta.las["point_format"]``), 7 for stores
+without a LAS source; stored LAS fields go back to their fields, results and
+ground truth become extra bytes (a ``classification`` result fills the LAS
+field).  The rules: docs/design/tiles.md, "What goes where".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import laspy
+import numpy as np
+
+from tiles.errors import UserError
+from tiles.ingest.lasformat import bit_shift, standard_names, subfields
+from tiles.store import TileStore
+
+#: LAS extra-bytes names and descriptions are at most 32 bytes.
+_NAME_LEN = 32
+
+
+@dataclass
+class Column:
+    """Where one store array goes in the LAS record."""
+
+    store: str
+    how: str  # "field", "bits", "component"
+    target: str  # LAS field (or packed field for bits)
+    mask: int = 0
+    component: int = 0
+    scale_colour: bool = False
+
+
+@dataclass
+class Layout:
+    """The output point format, its extra-bytes records and the store-array-to-field mapping (pickles small)."""
+
+    point_format: int
+    extra: list[dict[str, Any]] = field(default_factory=list)
+    columns: list[Column] = field(default_factory=list)
+
+    def point_format_obj(self) -> laspy.PointFormat:
+        """The laspy point format with the extra-bytes records."""
+        pf = laspy.PointFormat(self.point_format)
+        for e in self.extra:
+            pf.add_extra_dimension(laspy.ExtraBytesParams(
+                e["name"], e["type"], description=e.get("description", "")[:_NAME_LEN],
+                offsets=e.get("offsets"), scales=e.get("scales"), no_data=e.get("no_data")))
+        return pf
+
+    @property
+    def store_names(self) -> list[str]:
+        """The store arrays an export reads: the coordinates, ``point_index`` and every column's."""
+        return ["x", "y", "z", "point_index"] + [c.store for c in self.columns]
+
+
+def plan_layout(store: TileStore, point_format: int | None = None) -> Layout:
+    """Decide the point format and where every store array goes (see docs/design/tiles.md, "What goes where")."""
+    meta = store.meta
+    fmt = point_format if point_format is not None else int((meta.las or {}).get("point_format", 7))
+    if not 0 <= fmt <= 10:
+        raise UserError(None, f"LAS point format must be 0-10, not {fmt}")
+    std = set(standard_names(fmt))
+    subs = subfields(fmt)
+    has_result_class = any(d.name == "classification" and d.kind == "result" for d in meta.dimensions)
+    scale_colour = meta.las is None and meta.color_depth == 8
+    layout = Layout(fmt)
+    used: set[str] = set(std) | {"X", "Y", "Z"}
+    std_taken: set[str] = set()
+    groups: dict[str, str] = {}  # extra-bytes record name -> output name, for multi-element records
+
+    def add_extra(name: str, dtype: str, description: str, record: dict[str, Any] | None) -> str:
+        out, k = name[:_NAME_LEN], 1
+        while out in used:
+            k += 1
+            out = f"{name[:_NAME_LEN - 4]}_{k}"
+        used.add(out)
+        rec = {"name": out, "type": dtype, "description": description[:_NAME_LEN]}
+        for key in ("scales", "offsets", "no_data"):
+            if record and record.get(key) is not None:
+                rec[key] = record[key]
+        layout.extra.append(rec)
+        return out
+
+    # results first, so that they keep their own names
+    for d in sorted(meta.dimensions, key=lambda d: 0 if d.kind == "result" else 1):
+        if d.kind in ("coordinate", "index"):
+            continue
+        las = d.las or {}
+        lname = las.get("name", d.name)
+        plain = np.dtype(d.dtype).str[1:]
+        if d.kind == "result":
+            if d.name == "classification" and "classification" in std:
+                std_taken.add("classification")
+                layout.columns.append(_std_column(d.name, "classification", subs))
+            else:
+                layout.columns.append(Column(d.name, "field", add_extra(d.name, plain, d.description or d.name,
+                                                                        None)))
+        elif d.kind == "las":
+            if lname == "classification" and has_result_class:
+                target = add_extra("source_classification", plain, "classification of the source", None)
+                layout.columns.append(Column(d.name, "field", target))
+            elif lname in std and lname not in std_taken:
+                std_taken.add(lname)
+                col = _std_column(d.name, lname, subs)
+                col.scale_colour = scale_colour and lname in ("red", "green", "blue", "nir")
+                layout.columns.append(col)
+            else:  # a standard field this point format lacks
+                layout.columns.append(Column(d.name, "field", add_extra(lname, plain, d.description or lname,
+                                                                        None)))
+        elif las.get("component") is not None:  # one element of a multi-element extra-bytes record
+            if lname not in groups:
+                groups[lname] = add_extra(lname, las.get("type", plain), las.get("description", ""), las)
+            layout.columns.append(Column(d.name, "component", groups[lname], component=int(las["component"])))
+        else:  # extra bytes and ground truth
+            target = add_extra(lname, las.get("type") or plain, las.get("description", d.description or lname),
+                               las)
+            layout.columns.append(Column(d.name, "field", target))
+    return layout
+
+
+def _std_column(store_name: str, lname: str, subs: dict[str, tuple[str, int]]) -> Column:
+    if lname in subs:
+        packed, mask = subs[lname]
+        return Column(store_name, "bits", packed, mask=mask)
+    return Column(store_name, "field", lname)
+
+
+def pack_part(cols: dict[str, np.ndarray], layout: Layout) -> np.ndarray:
+    """LAS point records (a structured array of the layout's point format) from a part's columns."""
+    pf = layout.point_format_obj()
+    n = len(cols["x"])
+    arr = np.zeros(n, dtype=pf.dtype())
+    arr["X"], arr["Y"], arr["Z"] = cols["x"], cols["y"], cols["z"]
+    for c in layout.columns:
+        v = cols[c.store]
+        if c.scale_colour:
+            v = v.astype(np.uint16) * np.uint16(257)
+        if c.how == "bits":
+            top = c.mask >> bit_shift(c.mask)
+            if len(v) and (v.min() < 0 or v.max() > top):
+                raise UserError(None, f"{c.store} values up to {int(v.max())} do not fit the {top.bit_length()}-bit "
+                                      f"LAS field of point format {layout.point_format}: export to a format >= 6")
+            arr[c.target] |= (v.astype(np.uint8) << bit_shift(c.mask)) & c.mask
+        elif c.how == "component":
+            arr[c.target][:, c.component] = v
+        else:
+            arr[c.target] = v
+    return arr
