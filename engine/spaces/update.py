@@ -61,6 +61,8 @@ class UpdateSettings:
     distance: float = 0.15
     max_angle: float = 20.0
     min_height: float = 0.5
+    evidence: bool = True  # merge only across faces shown open (engine.spaces.openness); False: the paper's rule
+    divider_share: float = 0.5  # faces with a parse divider over this share of the pair's faces stay divided
 
     def __post_init__(self) -> None:
         if not 0 < self.coverage <= 1:
@@ -71,12 +73,15 @@ class UpdateSettings:
             raise ValueError(f"max-angle must be in [0, 90] degrees, not {self.max_angle}")
         if not 0 <= self.min_height <= 1:
             raise ValueError(f"min-height must be in [0, 1], not {self.min_height}")
+        if not 0 < self.divider_share <= 1:
+            raise ValueError(f"divider-share must be in (0, 1], not {self.divider_share}")
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "UpdateSettings":
         """``buildingparser.space-update.*`` with keyword overrides (None = use the setting)."""
         c = {k.replace("-", "_"): v for k, v in dict(config.get("space-update", {}) or {}).items()}
-        c = {k: float(v) for k, v in c.items() if k in ("coverage", "distance", "max_angle", "min_height")}
+        c = {k: (bool(v) if k == "evidence" else float(v)) for k, v in c.items()
+             if k in ("coverage", "distance", "max_angle", "min_height", "evidence", "divider_share")}
         c.update({k: v for k, v in overrides.items() if v is not None})
         return cls(**c)
 
@@ -155,16 +160,68 @@ def separated_pairs(parse: SpaceParse, walls: Sequence[Any],
             length = float(sum(f.extent[1] - f.extent[0] for f in nb.faces))
             covered = float(sum(face_coverage(f, boxes, parse.frame if getattr(f, "yaw", None) is None
                                               else Frame(f.yaw, parse.frame.origin), params) for f in nb.faces))
+            divided = float(sum(f.extent[1] - f.extent[0] for f in nb.faces if f.divider))
             out[(s.id, nb.space)] = {"length": length, "covered": covered,
-                                     "wall": length > 0 and covered >= params.coverage * length - 1e-9}
+                                     "wall": length > 0 and covered >= params.coverage * length - 1e-9,
+                                     "divider_share": divided / length if length > 0 else 0.0}
     return out
 
 
+def weigh_evidence(store, parse: SpaceParse, pairs: dict[tuple[int, int], dict[str, Any]], client=None,
+                   params: UpdateSettings | None = None) -> dict[tuple[int, int], dict[str, Any]]:
+    """Decide ``merge`` for every pair: no detected wall, weak divider evidence, and faces shown open.
+
+    A pair with a detected wall stays apart (the paper's rule); a pair whose faces are mostly parse
+    dividers (``divider_share``) stays apart whatever detection says; the others merge only when the
+    points across their faces without a divider are continuous (:func:`engine.spaces.openness.faces_open`).
+    With ``evidence`` off every pair without a wall merges (the paper's rule alone).
+    """
+    from engine.spaces.openness import faces_open
+
+    params = params or UpdateSettings.from_config()
+    if not params.evidence:
+        for v in pairs.values():
+            v["merge"], v["reason"] = not v["wall"], "wall" if v["wall"] else "no wall"
+        return pairs
+    faces: list[Face] = []
+    owner: list[tuple[int, int]] = []
+    for s in parse.spaces:
+        for nb in s.neighbours:
+            key = (s.id, nb.space)
+            v = pairs.get(key)
+            if v is None or v["wall"] or v["divider_share"] >= params.divider_share:
+                continue
+            for f in nb.faces:
+                if not f.divider:
+                    faces.append(f)
+                    owner.append(key)
+    ev = faces_open(store, parse.frame, faces, client=client)
+    seen: dict[tuple[int, int], list[int]] = defaultdict(lambda: [0, 0, 0])
+    for key, e in zip(owner, ev):
+        acc = seen[key]
+        acc[0] += e.get("slices", 0)
+        acc[1] += e.get("open_slices", 0)
+        acc[2] += 0 if e["open"] or e.get("reason") != "height step" else 1
+    for key, v in pairs.items():
+        if v["wall"]:
+            v["merge"], v["reason"] = False, "wall"
+        elif v["divider_share"] >= params.divider_share:
+            v["merge"], v["reason"] = False, "divider"
+        else:
+            n, k, steps = seen.get(key, [0, 0, 0])
+            v["open_slices"], v["seen_slices"] = k, n
+            from engine.spaces.openness import OpennessSettings
+            ok = n > 0 and steps == 0 and k >= OpennessSettings().min_open * n
+            v["merge"], v["reason"] = ok, "open" if ok else ("height step" if steps else "not shown open")
+    return pairs
+
+
 def merge_mapping(space_ids: Sequence[int], pairs: dict[tuple[int, int], dict[str, Any]]) -> dict[int, int]:
-    """Old id -> new id: connected components of the pairs without a wall, numbered by their smallest old id."""
+    """Old id -> new id: connected components of the pairs to merge (``merge``, else: without a wall),
+    numbered by their smallest old id."""
     g = nx.Graph()
     g.add_nodes_from(int(s) for s in space_ids)
-    g.add_edges_from(k for k, v in pairs.items() if not v["wall"])
+    g.add_edges_from(k for k, v in pairs.items() if v.get("merge", not v["wall"]))
     comps = sorted((sorted(c) for c in nx.connected_components(g)), key=lambda c: c[0])
     return {old: new for new, comp in enumerate(comps) for old in comp}
 
@@ -250,14 +307,18 @@ def update_spaces(store, parse: SpaceParse, walls: Sequence[Any], client=None, *
     """
     params = params or UpdateSettings.from_config()
     boxes = wall_boxes(walls)
-    pairs = separated_pairs(parse, boxes, params)
+    pairs = weigh_evidence(store, parse, separated_pairs(parse, boxes, params), client, params)
     mapping = merge_mapping([s.id for s in parse.spaces], pairs)
     has_truth = bool(truth) and truth in store.meta.names() and "space_id" in store.meta.names()
     record: dict[str, Any] = {"walls": int(len(boxes)), "pairs": len(pairs),
                               "separated": int(sum(v["wall"] for v in pairs.values())),
+                              "kept": {r: int(sum(v["reason"] == r for v in pairs.values()))
+                                       for r in ("wall", "divider", "height step", "not shown open")},
+                              "merges": int(len(parse.spaces) - len(set(mapping.values()))), "splits": 0,
                               "spaces_before": len(parse.spaces), "spaces_after": len(set(mapping.values())),
                               "params": {"coverage": params.coverage, "distance": params.distance,
-                                         "max_angle": params.max_angle, "min_height": params.min_height},
+                                         "max_angle": params.max_angle, "min_height": params.min_height,
+                                         "evidence": params.evidence, "divider_share": params.divider_share},
                               "merged": {str(k): v for k, v in mapping.items() if k != v}}
     if has_truth:
         from engine.metrics.ari import distributed_ari
