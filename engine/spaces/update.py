@@ -26,6 +26,15 @@ total length of the faces the two share (covered pieces of several walls are
 joined before measuring), so a wall with a door in it still separates, and a
 wall that only touches the face at an end (the side wall of a hallway) does not.
 
+The absence of a detected wall is not evidence of an opening (issue 23: where
+detection found few walls the paper's rule merged rooms wholesale, f707h ARI
+0.944 -> 0.458).  With ``evidence`` on (the default) a pair without a detected
+wall merges only when (:func:`weigh_evidence`) its faces carry no strong parse
+divider (:func:`strong_divider`; over ``divider-share`` of their length: kept
+whatever detection says) and the points across its other faces show them open
+(:mod:`engine.spaces.openness`: the floor runs through, no wall surface, one
+floor and one ceiling height on both sides).  Each pair records its ``reason``.
+
 New space ids: the components are numbered 0, 1, ... in the order of their
 smallest old id, so spaces keep their ids up to the first merge.  The per-point
 ``space_id`` of every tile is rewritten by one task per tile (each writes its
@@ -62,7 +71,8 @@ class UpdateSettings:
     max_angle: float = 20.0
     min_height: float = 0.5
     evidence: bool = True  # merge only across faces shown open (engine.spaces.openness); False: the paper's rule
-    divider_share: float = 0.5  # faces with a parse divider over this share of the pair's faces stay divided
+    divider_share: float = 0.5  # faces with a strong parse divider over this share of the pair's faces stay divided
+    strong_score: float = 3.0  # a peak-gap-peak divider at least this strong is strong (other kinds always are)
 
     def __post_init__(self) -> None:
         if not 0 < self.coverage <= 1:
@@ -81,7 +91,7 @@ class UpdateSettings:
         """``buildingparser.space-update.*`` with keyword overrides (None = use the setting)."""
         c = {k.replace("-", "_"): v for k, v in dict(config.get("space-update", {}) or {}).items()}
         c = {k: (bool(v) if k == "evidence" else float(v)) for k, v in c.items()
-             if k in ("coverage", "distance", "max_angle", "min_height", "evidence", "divider_share")}
+             if k in ("coverage", "distance", "max_angle", "min_height", "evidence", "divider_share", "strong_score")}
         c.update({k: v for k, v in overrides.items() if v is not None})
         return cls(**c)
 
@@ -147,6 +157,14 @@ def _union_length(lo: np.ndarray, hi: np.ndarray) -> float:
     return total + cur_hi - cur_lo
 
 
+def strong_divider(face: Face, params: UpdateSettings) -> bool:
+    """The parse's own evidence at the face is strong: a void (empty run), a ridge, a ceiling step, or a
+    peak-gap-peak divider scoring at least ``strong_score``."""
+    if not face.divider:
+        return False
+    return face.divider_kind != "peak-gap-peak" or float(face.score or 0.0) >= params.strong_score
+
+
 def separated_pairs(parse: SpaceParse, walls: Sequence[Any],
                     params: UpdateSettings | None = None) -> dict[tuple[int, int], dict[str, Any]]:
     """Every neighbour pair ``(a, b)``, ``a < b``: face length, wall-covered length, and whether a wall separates them."""
@@ -160,7 +178,7 @@ def separated_pairs(parse: SpaceParse, walls: Sequence[Any],
             length = float(sum(f.extent[1] - f.extent[0] for f in nb.faces))
             covered = float(sum(face_coverage(f, boxes, parse.frame if getattr(f, "yaw", None) is None
                                               else Frame(f.yaw, parse.frame.origin), params) for f in nb.faces))
-            divided = float(sum(f.extent[1] - f.extent[0] for f in nb.faces if f.divider))
+            divided = float(sum(f.extent[1] - f.extent[0] for f in nb.faces if strong_divider(f, params)))
             out[(s.id, nb.space)] = {"length": length, "covered": covered,
                                      "wall": length > 0 and covered >= params.coverage * length - 1e-9,
                                      "divider_share": divided / length if length > 0 else 0.0}
@@ -176,7 +194,7 @@ def weigh_evidence(store, parse: SpaceParse, pairs: dict[tuple[int, int], dict[s
     points across their faces without a divider are continuous (:func:`engine.spaces.openness.faces_open`).
     With ``evidence`` off every pair without a wall merges (the paper's rule alone).
     """
-    from engine.spaces.openness import faces_open
+    from engine.spaces.openness import OpennessSettings, faces_open
 
     params = params or UpdateSettings.from_config()
     if not params.evidence:
@@ -192,7 +210,7 @@ def weigh_evidence(store, parse: SpaceParse, pairs: dict[tuple[int, int], dict[s
             if v is None or v["wall"] or v["divider_share"] >= params.divider_share:
                 continue
             for f in nb.faces:
-                if not f.divider:
+                if not strong_divider(f, params):
                     faces.append(f)
                     owner.append(key)
     ev = faces_open(store, parse.frame, faces, client=client)
@@ -210,7 +228,6 @@ def weigh_evidence(store, parse: SpaceParse, pairs: dict[tuple[int, int], dict[s
         else:
             n, k, steps = seen.get(key, [0, 0, 0])
             v["open_slices"], v["seen_slices"] = k, n
-            from engine.spaces.openness import OpennessSettings
             ok = n > 0 and steps == 0 and k >= OpennessSettings().min_open * n
             v["merge"], v["reason"] = ok, "open" if ok else ("height step" if steps else "not shown open")
     return pairs
@@ -318,7 +335,8 @@ def update_spaces(store, parse: SpaceParse, walls: Sequence[Any], client=None, *
                               "spaces_before": len(parse.spaces), "spaces_after": len(set(mapping.values())),
                               "params": {"coverage": params.coverage, "distance": params.distance,
                                          "max_angle": params.max_angle, "min_height": params.min_height,
-                                         "evidence": params.evidence, "divider_share": params.divider_share},
+                                         "evidence": params.evidence, "divider_share": params.divider_share,
+                                         "strong_score": params.strong_score},
                               "merged": {str(k): v for k, v in mapping.items() if k != v}}
     if has_truth:
         from engine.metrics.ari import distributed_ari
