@@ -109,7 +109,8 @@ def _compute(input: str, out: str, client, opt: RunSettings, timings: dict[str, 
     from engine.detection.detect import DetectionSettings, detect
     from engine.outputs.labels import label_points, write_elements_json
     from engine.detection.model import load_model
-    from engine.spaces.update import UpdateSettings, update_spaces
+    from engine.outputs.reconcile import reconcile_elements
+    from engine.spaces.update import UpdateSettings, update_spaces, update_summary
     from engine.spaces.parse import SpaceSettings, SpaceParse, parse_spaces
 
     say = opt.say
@@ -193,11 +194,14 @@ def _compute(input: str, out: str, client, opt: RunSettings, timings: dict[str, 
         log.write(StageRecord("space_update", fp_update, "ok", t.seconds, outputs={"spaces": len(final.spaces)}))
         say(f"space update: {len(parsed.spaces)} -> {len(final.spaces)} spaces ({t.seconds:.1f} s)")
     space_of = _space_lookup(parsed, final)
+    origin = {int(e.element_id): int(e.space_id) for e in elements}
     for e in elements:
         e.space_id = space_of.get(int(e.space_id), int(e.space_id))
+    # one set of elements per merged space (issue 23): engine/outputs/reconcile.py
+    elements, reconciled = reconcile_elements(elements, parsed, space_of, origin)
 
     # -- per-point labels -------------------------------------------------------------------------
-    fp_labels = fingerprint("labels", None, fp_crf)
+    fp_labels = fingerprint("labels", None, fp_crf, fp_update)  # the update's merges reconcile the elements
     if not _skip(log, "labels", fp_labels, opt):
         log.forget("labels", "export")
         with failures_recorded(log, "labels", fp_labels), Timer() as t:
@@ -216,6 +220,7 @@ def _compute(input: str, out: str, client, opt: RunSettings, timings: dict[str, 
         with quiet_progress(export_job is not None):
             with Timer() as t:
                 metrics = _metrics(store, input, parsed, final, proposals, elements, crf_report, client, has_truth)
+                metrics["spaces"]["update"] = update_summary(parsed, final, reconciled)
             timings["metrics"] = t.seconds
             stats = _write_plan_outputs(store, final, elements, staging, client)
     except Exception:

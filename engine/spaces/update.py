@@ -362,3 +362,17 @@ def update_spaces(store, parse: SpaceParse, walls: Sequence[Any], client=None, *
     new_parse.stats["space_update"] = record
     store.set_doc(DOC, new_parse.to_doc())
     return new_parse, mapping
+
+
+def update_summary(parsed: SpaceParse, final: SpaceParse, elements: dict[str, Any] | None = None) -> dict[str, Any]:
+    """What the update did, for ``metrics.json`` and the report: merges, splits, why pairs were kept apart."""
+    rec = final.stats.get("space_update") if final is not parsed else None
+    out: dict[str, Any] = {"enabled": rec is not None, "spaces_before": len(parsed.spaces),
+                           "spaces_after": len(final.spaces), "merges": len(parsed.spaces) - len(final.spaces),
+                           "splits": 0}
+    if rec:
+        out.update(pairs=rec.get("pairs"), walls=rec.get("walls"), kept=rec.get("kept"),
+                   evidence=(rec.get("params") or {}).get("evidence", False))
+    if elements is not None:
+        out["elements"] = {k: v for k, v in elements.items() if k != "removed"}
+    return out
