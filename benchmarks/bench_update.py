@@ -59,8 +59,8 @@ def run(quick: bool = False, only: list[str] | None = None) -> dict[str, Any]:
             if only and name not in only:
                 continue
             store = opener(client)
-            out = os.path.join(cache_dir(), "update-" + os.path.basename(store.path.rstrip("/")))
-            m = run_building(store.path, out, client=client,
+            out = os.path.join(cache_dir(), "update-" + os.path.basename(store.url.rstrip("/")))
+            m = run_building(store.url, out, client=client,
                              options=RunSettings(model=model, export_points=False, say=lambda s: None))
             s = m["spaces"]
             rows.append({"building": name, "spaces_before": s["count_before_update"], "spaces_after": s["count"],
