@@ -78,3 +78,19 @@ def test_nothing_merged_changes_nothing():
     els = _elements(frame)
     out, rep = reconcile_elements(els, parsed, {0: 0, 1: 1, 2: 2}, {e.element_id: e.space_id for e in els})
     assert out == els and rep["removed"] == [] and rep["merged_spaces"] == 0
+
+
+def test_elements_json_records_the_reconciliation(tmp_path):
+    from engine.outputs.labels import read_elements_json, write_elements_json
+
+    frame = _frame(0.0)
+    parsed = SpaceParse.from_doc(_doc(frame))
+    space_of = {0: 0, 1: 0, 2: 1}
+    els = _elements(frame)
+    origin = {e.element_id: e.space_id for e in els}
+    for e in els:
+        e.space_id = space_of[e.space_id]
+    out, _ = reconcile_elements(els, parsed, space_of, origin)
+    recs = {r["element_id"]: r for r in read_elements_json(write_elements_json(out, tmp_path / "elements.json"))}
+    assert recs[0]["reconciled"] == {"from": [0, 2], "reason": "one floor per space"}
+    assert "reconciled" not in recs[8] and 2 not in recs
