@@ -78,7 +78,8 @@ SETTINGS: dict[str, Any] = {
     # engine/spaces/update.yaml
     "space-update": {
         "coverage": "float in (0, 1]", "distance": "float >= 0", "max-angle": "float in [0, 90]",
-        "min-height": "float in [0, 1]",
+        "min-height": "float in [0, 1]", "evidence": "bool", "divider-share": "float in [0, 1]",
+        "strong-score": "float >= 0",
     },
     # engine/detection/detection.yaml
     "detection": {

@@ -259,8 +259,16 @@ def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margi
 
 
 def element_records(elements: Sequence[Proposal], with_voxels: bool = True) -> list[dict[str, Any]]:
-    """The ``elements.json`` records (world coordinates), in element id order."""
-    return [e.element_record(with_voxels) for e in sorted(elements, key=lambda e: e.element_id)]
+    """The ``elements.json`` records (world coordinates), in element id order; an element that the space
+    update's reconciliation made from several (:mod:`engine.outputs.reconcile`) also has ``reconciled``
+    (``from``: the element ids joined, ``reason``)."""
+    out = []
+    for e in sorted(elements, key=lambda e: e.element_id):
+        rec = e.element_record(with_voxels)
+        if e.extra.get("reconciled"):
+            rec["reconciled"] = e.extra["reconciled"]
+        out.append(rec)
+    return out
 
 
 def write_elements_json(elements: Sequence[Proposal], path: str | os.PathLike, *, with_voxels: bool = True,

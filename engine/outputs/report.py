@@ -18,7 +18,10 @@ performance report.
     {"input": {"path": str, "points": int},
      "spaces": {"count": int, "ari": float|null, "ari_oversegmented": float|null,
                 "ari_before_update": float|null, "cells": int,
-                "count_before_update": int},                         # the last one optional
+                "count_before_update": int,                          # optional
+                "update": {"enabled": bool, "spaces_before": int, "spaces_after": int, "merges": int,
+                           "splits": int, "evidence": bool, "pairs": int, "walls": int,
+                           "kept": {reason: int}, "elements": {reconciliation counts}}},  # optional
      "detection": {"ap": {class: float}, "map": float, "structural_map": float, "furniture_map": float,
                    "ap_before_crf": {class: float}, "map_before_crf": float,
                    "ap_crf_ranked": {class: float}|null, "map_crf_ranked": float|null,
@@ -127,8 +130,29 @@ def _spaces_section(m: dict[str, Any]) -> str:
     rows += [["cells (over-segmentation)", fmt_int(s.get("cells"))], ["ARI", fmt_float(s.get("ari"), 3)],
              ["ARI before the space update", fmt_float(s.get("ari_before_update"), 3)],
              ["ARI of the over-segmentation", fmt_float(s.get("ari_oversegmented"), 3)]]
+    rows += _update_rows(s.get("update"))
     note = "" if not _missing(s.get("ari")) else '<p class="note">No ground truth: no ARI.</p>'
     return _table("spaces", ["", ""], rows) + note
+
+
+def _update_rows(u: dict[str, Any] | None) -> list[list[str]]:
+    """The space update's effect: merges, splits, why pairs stayed apart, elements reconciled."""
+    if not u:
+        return []
+    if not u.get("enabled"):
+        return [["space update", "off (--no-update)"]]
+    kept = ", ".join(f"{k}: {v}" for k, v in (u.get("kept") or {}).items() if v)
+    rows = [["space update", f"{fmt_int(u.get('merges'))} merges, {fmt_int(u.get('splits'))} splits"
+                             + (" (merges need open faces)" if u.get("evidence") else " (paper's rule)")]]
+    if kept:
+        rows.append(["pairs kept apart by the update", kept])
+    e = u.get("elements") or {}
+    if e.get("merged_spaces"):
+        rows.append(["elements reconciled in merged spaces",
+                     f"{e.get('floors_joined', 0)} floors and {e.get('ceilings_joined', 0)} ceilings joined, "
+                     f"{e.get('duplicates_suppressed', 0)} duplicates suppressed, "
+                     f"{e.get('seam_walls_dropped', 0)} walls on removed dividers dropped"])
+    return rows
 
 
 def _stats_section(stats: dict[str, Any] | None) -> str:

@@ -103,6 +103,8 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
     """Every stage up to the metrics, and the outputs but ``metrics.json`` and the report into ``staging``;
     returns the metrics and the space statistics."""
     from engine.detection.model import load_model
+    from engine.outputs.reconcile import reconcile_elements
+    from engine.spaces.update import update_summary
 
     model = load_model(opt.model)  # a bad model path fails here, before any long work
     timings: dict[str, float] = {}
@@ -114,9 +116,12 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
     elements, crf_report, fp_crf = _crf_stage(ctx, model, proposals, fp_det)
     final, fp_update = _update_stage(ctx, parsed, elements, fp_crf)
     space_of = space_lookup(parsed, final)
+    origin = {int(e.element_id): int(e.space_id) for e in elements}
     for e in elements:
         e.space_id = space_of.get(int(e.space_id), int(e.space_id))
-    fp_labels = _labels_stage(ctx, elements, fp_crf)
+    # one set of elements per merged space (issue 23)
+    elements, reconciled = reconcile_elements(elements, parsed, space_of, origin)
+    fp_labels = _labels_stage(ctx, elements, fp_crf, fp_update)
 
     # points.laz is written while the metrics and the small outputs are computed: those need the labels, not
     # the file, and their tasks and driver work fill the export's idle moments (its two task batches' ends).
@@ -128,6 +133,7 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
             with Timer() as t:
                 metrics = compute_metrics(store, ctx.input, parsed, final, proposals, elements, crf_report,
                                           ctx.client, has_truth)
+                metrics["spaces"]["update"] = update_summary(parsed, final, reconciled)
             ctx.timings["metrics"] = t.seconds
             stats = write_plan_outputs(store, final, elements, ctx.staging, ctx.client)
     except Exception:
@@ -255,11 +261,11 @@ def _update_stage(ctx: RunContext, parsed, elements: list, fp_crf: str):
     return final, fp
 
 
-def _labels_stage(ctx: RunContext, elements: list, fp_crf: str) -> str:
+def _labels_stage(ctx: RunContext, elements: list, fp_crf: str, fp_update: str) -> str:
     """Per-point classification and element_id; returns the stage's fingerprint."""
     from engine.outputs.labels import label_points
 
-    fp = fingerprint("labels", None, fp_crf)
+    fp = fingerprint("labels", None, fp_crf, fp_update)  # the update's merges reconcile the elements
     _, seconds = ctx.stage("labels", fp, lambda: label_points(ctx.store, elements, client=ctx.client),
                            load=lambda: True)
     if seconds is not None:

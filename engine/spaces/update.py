@@ -26,6 +26,15 @@ total length of the faces the two share (covered pieces of several walls are
 joined before measuring), so a wall with a door in it still separates, and a
 wall that only touches the face at an end (the side wall of a hallway) does not.
 
+The absence of a detected wall is not evidence of an opening (issue 23: where
+detection found few walls the paper's rule merged rooms wholesale, f707h ARI
+0.944 -> 0.458).  With ``evidence`` on (the default) a pair without a detected
+wall merges only when (:func:`weigh_evidence`) its faces carry no strong parse
+divider (:func:`strong_divider`; over ``divider-share`` of their length: kept
+whatever detection says) and the points across its other faces show them open
+(:mod:`engine.spaces.openness`: the floor runs through, no wall surface, one
+floor and one ceiling height on both sides).  Each pair records its ``reason``.
+
 New space ids: the components are numbered 0, 1, ... in the order of their
 smallest old id, so spaces keep their ids up to the first merge.  The per-point
 ``space_id`` of every tile is rewritten by one task per tile (each writes its
@@ -61,6 +70,9 @@ class UpdateSettings:
     distance: float = 0.15
     max_angle: float = 20.0
     min_height: float = 0.5
+    evidence: bool = True  # merge only across faces shown open (engine.spaces.openness); False: the paper's rule
+    divider_share: float = 0.5  # faces with a strong parse divider over this share of the pair's faces stay divided
+    strong_score: float = 3.0  # a peak-gap-peak divider at least this strong is strong (other kinds always are)
 
     def __post_init__(self) -> None:
         if not 0 < self.coverage <= 1:
@@ -71,6 +83,8 @@ class UpdateSettings:
             raise ValueError(f"max-angle must be in [0, 90] degrees, not {self.max_angle}")
         if not 0 <= self.min_height <= 1:
             raise ValueError(f"min-height must be in [0, 1], not {self.min_height}")
+        if not 0 < self.divider_share <= 1:
+            raise ValueError(f"divider-share must be in (0, 1], not {self.divider_share}")
 
     @classmethod
     def from_config(cls, **overrides: Any) -> "UpdateSettings":
@@ -141,6 +155,14 @@ def _union_length(lo: np.ndarray, hi: np.ndarray) -> float:
     return total + cur_hi - cur_lo
 
 
+def strong_divider(face: Face, params: UpdateSettings) -> bool:
+    """The parse's own evidence at the face is strong: a void (empty run), a ridge, a ceiling step, or a
+    peak-gap-peak divider scoring at least ``strong_score``."""
+    if not face.divider:
+        return False
+    return face.divider_kind != "peak-gap-peak" or float(face.score or 0.0) >= params.strong_score
+
+
 def separated_pairs(parse: SpaceParse, walls: Sequence[Any],
                     params: UpdateSettings | None = None) -> dict[tuple[int, int], dict[str, Any]]:
     """Every neighbour pair ``(a, b)``, ``a < b``: face length, wall-covered length, and whether a wall separates them."""
@@ -154,16 +176,67 @@ def separated_pairs(parse: SpaceParse, walls: Sequence[Any],
             length = float(sum(f.extent[1] - f.extent[0] for f in nb.faces))
             covered = float(sum(face_coverage(f, boxes, parse.frame if getattr(f, "yaw", None) is None
                                               else Frame(f.yaw, parse.frame.origin), params) for f in nb.faces))
+            divided = float(sum(f.extent[1] - f.extent[0] for f in nb.faces if strong_divider(f, params)))
             out[(s.id, nb.space)] = {"length": length, "covered": covered,
-                                     "wall": length > 0 and covered >= params.coverage * length - 1e-9}
+                                     "wall": length > 0 and covered >= params.coverage * length - 1e-9,
+                                     "divider_share": divided / length if length > 0 else 0.0}
     return out
 
 
+def weigh_evidence(store, parse: SpaceParse, pairs: dict[tuple[int, int], dict[str, Any]], client=None,
+                   params: UpdateSettings | None = None) -> dict[tuple[int, int], dict[str, Any]]:
+    """Decide ``merge`` for every pair: no detected wall, weak divider evidence, and faces shown open.
+
+    A pair with a detected wall stays apart (the paper's rule); a pair whose faces are mostly parse
+    dividers (``divider_share``) stays apart whatever detection says; the others merge only when the
+    points across their faces without a divider are continuous (:func:`engine.spaces.openness.faces_open`).
+    With ``evidence`` off every pair without a wall merges (the paper's rule alone).
+    """
+    from engine.spaces.openness import OpennessSettings, faces_open
+
+    params = params or UpdateSettings.from_config()
+    if not params.evidence:
+        for v in pairs.values():
+            v["merge"], v["reason"] = not v["wall"], "wall" if v["wall"] else "no wall"
+        return pairs
+    faces: list[Face] = []
+    owner: list[tuple[int, int]] = []
+    for s in parse.spaces:
+        for nb in s.neighbours:
+            key = (s.id, nb.space)
+            v = pairs.get(key)
+            if v is None or v["wall"] or v["divider_share"] >= params.divider_share:
+                continue
+            for f in nb.faces:
+                if not strong_divider(f, params):
+                    faces.append(f)
+                    owner.append(key)
+    ev = faces_open(store, parse.frame, faces, client=client)
+    seen: dict[tuple[int, int], list[int]] = defaultdict(lambda: [0, 0, 0])
+    for key, e in zip(owner, ev):
+        acc = seen[key]
+        acc[0] += e.get("slices", 0)
+        acc[1] += e.get("open_slices", 0)
+        acc[2] += 0 if e["open"] or e.get("reason") != "height step" else 1
+    for key, v in pairs.items():
+        if v["wall"]:
+            v["merge"], v["reason"] = False, "wall"
+        elif v["divider_share"] >= params.divider_share:
+            v["merge"], v["reason"] = False, "divider"
+        else:
+            n, k, steps = seen.get(key, [0, 0, 0])
+            v["open_slices"], v["seen_slices"] = k, n
+            ok = n > 0 and steps == 0 and k >= OpennessSettings().min_open * n
+            v["merge"], v["reason"] = ok, "open" if ok else ("height step" if steps else "not shown open")
+    return pairs
+
+
 def merge_mapping(space_ids: Sequence[int], pairs: dict[tuple[int, int], dict[str, Any]]) -> dict[int, int]:
-    """Old id -> new id: connected components of the pairs without a wall, numbered by their smallest old id."""
+    """Old id -> new id: connected components of the pairs to merge (``merge``, else: without a wall),
+    numbered by their smallest old id."""
     g = nx.Graph()
     g.add_nodes_from(int(s) for s in space_ids)
-    g.add_edges_from(k for k, v in pairs.items() if not v["wall"])
+    g.add_edges_from(k for k, v in pairs.items() if v.get("merge", not v["wall"]))
     comps = sorted((sorted(c) for c in nx.connected_components(g)), key=lambda c: c[0])
     return {old: new for new, comp in enumerate(comps) for old in comp}
 
@@ -249,14 +322,19 @@ def update_spaces(store, parse: SpaceParse, walls: Sequence[Any], client=None, *
     """
     params = params or UpdateSettings.from_config()
     boxes = wall_boxes(walls)
-    pairs = separated_pairs(parse, boxes, params)
+    pairs = weigh_evidence(store, parse, separated_pairs(parse, boxes, params), client, params)
     mapping = merge_mapping([s.id for s in parse.spaces], pairs)
     has_truth = bool(truth) and truth in store.meta.names() and "space_id" in store.meta.names()
     record: dict[str, Any] = {"walls": int(len(boxes)), "pairs": len(pairs),
                               "separated": int(sum(v["wall"] for v in pairs.values())),
+                              "kept": {r: int(sum(v["reason"] == r for v in pairs.values()))
+                                       for r in ("wall", "divider", "height step", "not shown open")},
+                              "merges": int(len(parse.spaces) - len(set(mapping.values()))), "splits": 0,
                               "spaces_before": len(parse.spaces), "spaces_after": len(set(mapping.values())),
                               "params": {"coverage": params.coverage, "distance": params.distance,
-                                         "max_angle": params.max_angle, "min_height": params.min_height},
+                                         "max_angle": params.max_angle, "min_height": params.min_height,
+                                         "evidence": params.evidence, "divider_share": params.divider_share,
+                                         "strong_score": params.strong_score},
                               "merged": {str(k): v for k, v in mapping.items() if k != v}}
     if has_truth:
         from engine.metrics.ari import distributed_ari
@@ -282,3 +360,17 @@ def update_spaces(store, parse: SpaceParse, walls: Sequence[Any], client=None, *
     new_parse.stats["space_update"] = record
     store.set_doc(DOC, new_parse.to_doc())
     return new_parse, mapping
+
+
+def update_summary(parsed: SpaceParse, final: SpaceParse, elements: dict[str, Any] | None = None) -> dict[str, Any]:
+    """What the update did, for ``metrics.json`` and the report: merges, splits, why pairs were kept apart."""
+    rec = final.stats.get("space_update") if final is not parsed else None
+    out: dict[str, Any] = {"enabled": rec is not None, "spaces_before": len(parsed.spaces),
+                           "spaces_after": len(final.spaces), "merges": len(parsed.spaces) - len(final.spaces),
+                           "splits": 0}
+    if rec:
+        out.update(pairs=rec.get("pairs"), walls=rec.get("walls"), kept=rec.get("kept"),
+                   evidence=(rec.get("params") or {}).get("evidence", False))
+    if elements is not None:
+        out["elements"] = {k: v for k, v in elements.items() if k != "removed"}
+    return out
