@@ -1,12 +1,12 @@
 # Two commands do everything on a fresh machine with Python 3.11 and make:
 #   make demo   -- create .venv, install, run the whole pipeline on a generated building
-#   make test   -- create .venv if needed, run the whole test suite
+#   make test   -- create .venv if needed, run lint (ruff, mypy on the public API) and the whole test suite
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test bench bench-quick model venv clean
+.PHONY: demo test lint bench bench-quick model venv clean
 
 venv: $(STAMP)
 
@@ -20,7 +20,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/buildingparser demo --out demo-output
 
-test: $(STAMP)
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/mypy
+
+test: lint
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

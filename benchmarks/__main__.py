@@ -136,14 +136,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"benchmarks: error: unknown suite(s) {unknown}; known: {names}", file=sys.stderr)
             return 2
         names = args.only
-    started = dt.datetime.now(dt.timezone.utc)
+    started = dt.datetime.now(dt.UTC)
     results = run_suites(names, args.quick)
     tracked = flatten(results)
     history = load_history(args.quick)
     rows = compare(tracked, history)
     record = {"date": started.isoformat(timespec="seconds"), "commit": commit(), "quick": args.quick,
               "suites": results, "tracked": tracked,
-              "seconds": round((dt.datetime.now(dt.timezone.utc) - started).total_seconds(), 1)}
+              "seconds": round((dt.datetime.now(dt.UTC) - started).total_seconds(), 1)}
     if not args.no_save:
         RESULTS.mkdir(exist_ok=True)
         path = RESULTS / f"{started:%Y-%m-%d}-{record['commit']}{'-quick' if args.quick else ''}.json"

@@ -71,8 +71,9 @@ def _cluster(n: int):
 
 
 def _warm_up() -> None:
-    import engine.crf.apply  # noqa: F401
     from ortools.sat.python import cp_model  # noqa: F401
+
+    import engine.crf.apply  # noqa: F401
 
 
 def _flat(groups):
@@ -136,8 +137,8 @@ def scenes_part(quick: bool) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     from engine.crf.apply import apply_crf
     from engine.crf.graph import build_graph, energies
     from engine.crf.model import CRFSettings
-    from engine.crf.solve import solve_ip
     from engine.crf.scenes import make_scenes
+    from engine.crf.solve import solve_ip
     from engine.crf.ssvm import train_crf
 
     n_train, n_test, fp = (6, 6, 1.5) if quick else (24, 24, 4.0)
@@ -208,12 +209,12 @@ def buildings_part(workdir: str, seeds: dict[str, list[int]] | None = None,
                    area: float = 150.0) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Generated buildings (``seeds`` per role, ``area`` m² each): detector, CRF and test buildings kept apart."""
     from engine.crf.apply import apply_crf
-    from engine.detection.detect import detect
-    from engine.metrics.ari import distributed_ari
-    from engine.spaces.update import update_spaces
-    from engine.spaces.parse import parse_spaces
     from engine.crf.labels import group_by_space
     from engine.crf.ssvm import train_crf
+    from engine.detection.detect import detect
+    from engine.metrics.ari import distributed_ari
+    from engine.spaces.parse import parse_spaces
+    from engine.spaces.update import update_spaces
     from engine.synth import generate
     from engine.training.synthetic import synthetic_yaw
     from engine.training.train import train

@@ -131,11 +131,11 @@ def _store(seed: int, gen_kw: dict[str, Any], client) -> Any:
 
 
 def run(quick: bool = False) -> dict[str, Any]:
-    from engine.training.ablation import detect_many
     from engine.detection.detect import detect
     from engine.detection.features import ABLATIONS
-    from engine.outputs.labels import label_points
     from engine.metrics.detection import PointEvaluation, evaluate_points, format_ap_table
+    from engine.outputs.labels import label_points
+    from engine.training.ablation import detect_many
     from engine.training.settings import TrainSettings
     from engine.training.svm import refit_without
     from engine.training.train import train_with_samples

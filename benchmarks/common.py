@@ -64,7 +64,7 @@ class PeakMemory:
             self.peak_single = max(self.peak_single, max(rss, default=0))
             self._stop.wait(self.interval)
 
-    def __enter__(self) -> "PeakMemory":
+    def __enter__(self) -> PeakMemory:
         self._thread.start()
         return self
 

@@ -31,8 +31,8 @@ def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list
     from engine.crf.apply import apply_crf, rescored
     from engine.crf.model import CRFWeights
     from engine.detection.detect import detect
-    from engine.metrics.detection import evaluate_detections
     from engine.detection.model import load_model
+    from engine.metrics.detection import evaluate_detections
     from engine.synth import generate
     from engine.training.synthetic import synthetic_yaw
     from tiles.store import open_store

@@ -20,8 +20,17 @@ import numpy as np
 from tiles import paths, zarrio
 from tiles.config import setting
 from tiles.errors import UserError
-from tiles.schema import (META_KEY, POINT_INDEX, SCHEMA_VERSION, Dimension, Part, Source, StoreMeta,
-                          TileInfo, software_name)
+from tiles.schema import (
+    META_KEY,
+    POINT_INDEX,
+    SCHEMA_VERSION,
+    Dimension,
+    Part,
+    Source,
+    StoreMeta,
+    TileInfo,
+    software_name,
+)
 from tiles.staging import pieces, read_staging, split_bytes, staging_codec, write_staging
 from tiles.store import TileStore, tile_name, utc_now, write_doc
 from tiles.tasks import run_tasks
@@ -70,7 +79,7 @@ class StoreBuilder(TileGrid):
     @classmethod
     def create(cls, url: str, *, dimensions: list[Dimension], scale: list[float], offset: list[float],
                tile_size: float | None = None, overwrite: bool = False,
-               storage_options: dict[str, Any] | None = None) -> "StoreBuilder":
+               storage_options: dict[str, Any] | None = None) -> StoreBuilder:
         """Start a build: check the target and create the temporary store.
 
         ``dimensions`` are the stored per-point arrays except ``point_index``

@@ -63,7 +63,7 @@ class GTElement:
         return d
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "GTElement":
+    def from_json(cls, d: dict[str, Any]) -> GTElement:
         """Read an element record; keys beyond the contract (e.g. the generator's ``annotation``) are ignored."""
         d = dict(d)
         d["class_"] = d.pop("class")

@@ -61,7 +61,7 @@ class Dimension:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "Dimension":
+    def from_json(cls, d: dict[str, Any]) -> Dimension:
         return cls(**d)
 
 
@@ -89,7 +89,7 @@ class TileInfo:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "TileInfo":
+    def from_json(cls, d: dict[str, Any]) -> TileInfo:
         return cls(**d)
 
 
@@ -106,7 +106,7 @@ class Source:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "Source":
+    def from_json(cls, d: dict[str, Any]) -> Source:
         return cls(**d)
 
 
@@ -126,7 +126,7 @@ class Part:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "Part":
+    def from_json(cls, d: dict[str, Any]) -> Part:
         return cls(**d)
 
 
@@ -157,7 +157,7 @@ class StoreMeta:
         return d
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "StoreMeta":
+    def from_json(cls, d: dict[str, Any]) -> StoreMeta:
         d = dict(d)
         d["tiles"] = [TileInfo.from_json(t) for t in d.get("tiles", [])]
         d["parts"] = [Part.from_json(p) for p in d.get("parts", [])]

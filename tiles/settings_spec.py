@@ -39,11 +39,11 @@ class Spec:
     lo_open: bool = False
     hi_open: bool = False
     choices: tuple[str, ...] = ()
-    inner: "Spec | None" = None
+    inner: Spec | None = None
     nullable: bool = False
 
     @classmethod
-    def parse(cls, text: str) -> "Spec":
+    def parse(cls, text: str) -> Spec:
         """The spec of a declaration (a ``ValueError`` when the declaration itself is malformed)."""
         body, nullable = text.strip(), False
         if body.endswith("| null"):

@@ -25,7 +25,7 @@ STAGING_CODEC = {"cname": "lz4", "clevel": 5, "shuffle": numcodecs.Blosc.SHUFFLE
 STAGING_PIECE = 1 << 26
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def staging_codec() -> numcodecs.Blosc:
     """The Blosc codec of :data:`STAGING_CODEC` (one per process)."""
     return numcodecs.Blosc(blocksize=0, **STAGING_CODEC)

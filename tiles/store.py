@@ -77,7 +77,7 @@ class TileStore:
             self._meta = read_meta(self.url, self.storage_options)
         return self._meta
 
-    def refresh(self) -> "TileStore":
+    def refresh(self) -> TileStore:
         """Forget cached metadata (after another process changed the store)."""
         self._meta = None
         self._group = None
@@ -227,4 +227,4 @@ def open_store(url: str, storage_options: dict[str, Any] | None = None) -> TileS
 
 
 def utc_now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")

@@ -42,7 +42,7 @@ def open_group(url: str, storage_options: dict[str, Any] | None, mode: str) -> z
     return zarr.open_group(url, storage_options=storage_options, **kw)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _template(dtype: str) -> tuple[str, dict[str, Any]]:
     """zarr-python's own metadata for a 1-D array of ``dtype`` with the tile codec, as JSON text."""
     arr = zarr.create_array(zarr.storage.MemoryStore(), shape=(1,), dtype=dtype, chunks=(1,),
@@ -53,7 +53,7 @@ def _template(dtype: str) -> tuple[str, dict[str, Any]]:
     return json.dumps(meta), blosc
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _encoder(cname: str, clevel: int, shuffle: str, typesize: int, blocksize: int) -> numcodecs.Blosc:
     shuffles = {"noshuffle": numcodecs.Blosc.NOSHUFFLE, "shuffle": numcodecs.Blosc.SHUFFLE,
                 "bitshuffle": numcodecs.Blosc.BITSHUFFLE}

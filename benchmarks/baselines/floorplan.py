@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from engine.metrics.ari import ari_from_contingency, contingency_pairs, contingency_table, sum_pairs
 from engine.spaces.dividers import vertical_params
 from engine.spaces.histograms import share, z_histogram
-from engine.metrics.ari import ari_from_contingency, contingency_pairs, contingency_table, sum_pairs
 from engine.spaces.slicing import find_storeys
 from tiles.tasks import run_tasks
 

@@ -187,7 +187,7 @@ class BoxFit:
         return {"boxfit_coef": self.coef, "boxfit_enabled": self.enabled}
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], report: dict[str, Any] | None = None) -> "BoxFit | None":
+    def from_arrays(cls, arrays: dict[str, np.ndarray], report: dict[str, Any] | None = None) -> BoxFit | None:
         if "boxfit_coef" not in arrays:
             return None
         return cls(arrays["boxfit_coef"], arrays["boxfit_enabled"], dict(report or {}))

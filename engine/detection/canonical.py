@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from engine.detection import moments as mom
+
 #: Sides of the aligned box, in the order of the quarter turns that bring each to ``y = 0``.
 SIDES = ("y-min", "x-max", "y-max", "x-min")
 
@@ -121,7 +122,7 @@ class CanonicalFrame:
                 "entrance": self.entrance, "info": self.info}
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "CanonicalFrame":
+    def from_json(cls, d: dict[str, Any]) -> CanonicalFrame:
         return cls(d["yaw"], d["origin"], d["extent"], d.get("entrance", "longest-wall"), d.get("info", {}))
 
 

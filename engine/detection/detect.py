@@ -59,7 +59,6 @@ from engine.spaces.points import SpacePoints, SpaceRef, index_spaces, load_space
 from tiles.classes import ELEMENT_CLASSES, element_class_list
 from tiles.tasks import run_tasks
 
-
 CEILING, FLOOR = ELEMENT_CLASSES.index("ceiling"), ELEMENT_CLASSES.index("floor")
 #: How a space's one ceiling and floor are chosen among their windows (:func:`surface_order`).
 SURFACE_CHOICES = ("extreme", "halves", "score")
@@ -105,7 +104,7 @@ class DetectionSettings:
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod
-    def from_config(cls, **overrides: Any) -> "DetectionSettings":
+    def from_config(cls, **overrides: Any) -> DetectionSettings:
         """Settings from ``buildingparser.detection.*``, with keyword overrides."""
         kw = config.settings_fields(cls, "detection")
         kw.update(overrides)

@@ -137,7 +137,7 @@ class WindowDictionary:
         return iou ** self.iou_weight * agree ** (1.0 - self.iou_weight) - 1.0
 
     def fit(self, class_codes: np.ndarray, unit_sizes: np.ndarray, metric_sizes: np.ndarray,
-            occupancy: np.ndarray) -> "WindowDictionary":
+            occupancy: np.ndarray) -> WindowDictionary:
         """Cluster the instances of each class into windows.
 
         Parameters
@@ -235,7 +235,7 @@ class WindowDictionary:
                 "relative_ratio": self.relative_ratio}
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], params: dict[str, Any]) -> "WindowDictionary":
+    def from_arrays(cls, arrays: dict[str, np.ndarray], params: dict[str, Any]) -> WindowDictionary:
         d = cls(**{"relative_ratio": None, **params})  # older models: the rule they were fitted with
         d.atoms_ = [Atom(int(c), us.astype(np.float64), ms.astype(np.float64), rel.astype(bool), occ.astype(bool),
                          int(n))

@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 
 from engine.detection import moments as mom
+
 #: Tent centres of the position and unit-size codes (unit cube).
 UNIT_TENTS = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: Tent centres of the metric size code, in metres (log2-spaced coding).
@@ -210,7 +211,7 @@ class FeatureLayout:
         """The context block's groups (none in older layouts)."""
         return CONTEXT_BLOCKS if self.context else ()
 
-    def without(self, groups) -> "FeatureLayout":
+    def without(self, groups) -> FeatureLayout:
         """This layout with ``groups`` disabled as well (same columns)."""
         return dataclasses.replace(self, disabled=tuple(dict.fromkeys(self.disabled + tuple(groups))))
 
@@ -234,7 +235,7 @@ class FeatureLayout:
                          "then the context blocks"}
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "FeatureLayout":
+    def from_json(cls, d: dict[str, Any]) -> FeatureLayout:
         # models written before colour normalisation existed used raw colours
         # and before the boundary code (the context block) existed had no such block
         lay = cls(int(d["k"]), tuple(d.get("disabled", ())), int(d.get("min_points", 1)),
@@ -476,7 +477,7 @@ class SpaceVolume:
 
     @classmethod
     def build(cls, xyz: np.ndarray, rgb: np.ndarray | None, frame: Any, voxel: float,
-              max_cells: int, colour: str = "none") -> "SpaceVolume":
+              max_cells: int, colour: str = "none") -> SpaceVolume:
         """Accumulate the moments of a space's points (``xyz`` in the frame's coordinates, ``rgb`` in [0, 1]).
 
         ``colour`` normalises the colours first (:func:`normalise_colours`; a model's ``layout.colour``).
@@ -486,7 +487,7 @@ class SpaceVolume:
 
     @classmethod
     def from_metric(cls, metric: np.ndarray, rgb: np.ndarray | None, frame: Any, grid: mom.VoxelGrid,
-                    colour: str = "none", flat: np.ndarray | None = None) -> "SpaceVolume":
+                    colour: str = "none", flat: np.ndarray | None = None) -> SpaceVolume:
         """:meth:`build` from points already in canonical metres (``frame.to_metric``) on a chosen grid.
 
         ``flat`` is their :meth:`engine.detection.moments.VoxelGrid.flat_index` when the caller has it.

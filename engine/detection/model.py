@@ -50,9 +50,9 @@ from typing import Any
 import numpy as np
 
 from engine.detection.boxfit import BoxFit
-from engine.detection.rescore import Rescorer
 from engine.detection.dictionary import WindowDictionary
 from engine.detection.features import FeatureLayout
+from engine.detection.rescore import Rescorer
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
 
@@ -196,7 +196,7 @@ class Model:
         return stem + ".npz", stem + ".json"
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Model":
+    def load(cls, path: str | os.PathLike) -> Model:
         """Read a model written by :meth:`save` (no pickle); a :class:`UserError` if it is not one."""
         stem = model_stem(path)
         for ext in (".json", ".npz"):

@@ -39,7 +39,7 @@ class VoxelGrid:
     shape: tuple[int, int, int]
 
     @classmethod
-    def covering(cls, extent, voxel: float, max_cells: int) -> "VoxelGrid":
+    def covering(cls, extent, voxel: float, max_cells: int) -> VoxelGrid:
         """The grid of about ``voxel`` metres over ``extent``, coarsened to at most ``max_cells`` voxels."""
         e = np.maximum(np.asarray(extent, dtype=np.float64), 1e-6)
         v = float(voxel)

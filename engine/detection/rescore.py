@@ -32,7 +32,8 @@ from typing import Any
 import numpy as np
 from sklearn.linear_model import LogisticRegression
 
-from engine.detection.boxfit import N_FEATURES as BOX_FEATURES, box_features
+from engine.detection.boxfit import N_FEATURES as BOX_FEATURES
+from engine.detection.boxfit import box_features
 from engine.metrics.detection import average_precision
 from tiles.classes import ELEMENT_CLASSES
 
@@ -119,7 +120,7 @@ class Rescorer:
                 "rescore_bias": self.bias, "rescore_enabled": self.enabled}
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], report: dict[str, Any] | None = None) -> "Rescorer | None":
+    def from_arrays(cls, arrays: dict[str, np.ndarray], report: dict[str, Any] | None = None) -> Rescorer | None:
         if "rescore_coef" not in arrays:
             return None
         return cls(arrays["rescore_mean"], arrays["rescore_scale"], arrays["rescore_coef"], arrays["rescore_bias"],

@@ -57,7 +57,7 @@ class RevealSettings:
             raise ValueError("need reveal-grow >= 0, 0 <= reveal-quantile < 0.5, thin-voxels >= 0, solid-edge >= 0")
 
     @classmethod
-    def from_config(cls, **overrides: Any) -> "RevealSettings":
+    def from_config(cls, **overrides: Any) -> RevealSettings:
         kw = config.settings_fields(cls, "detection", keys={
             "classes": "reveal-classes", "grow": "reveal-grow", "quantile": "reveal-quantile",
             "thin_voxels": "reveal-thin-voxels", "solid_classes": "solid-classes", "solid_edge": "solid-edge"})

@@ -39,8 +39,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.detection import moments as mom
-from engine.detection.features import (LOCAL_SIZE, FeatureLayout, SpaceVolume, context_features, context_margin,
-                             global_scores, local_features, slab_interval, sub_bounds)
+from engine.detection.features import (
+    LOCAL_SIZE,
+    FeatureLayout,
+    SpaceVolume,
+    context_features,
+    context_margin,
+    global_scores,
+    local_features,
+    slab_interval,
+    sub_bounds,
+)
 
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000

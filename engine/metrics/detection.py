@@ -204,7 +204,7 @@ class MatchResult:
     tp: dict[int, np.ndarray] = field(default_factory=dict)
     n_gt: dict[int, int] = field(default_factory=dict)
 
-    def add(self, other: "MatchResult") -> "MatchResult":
+    def add(self, other: MatchResult) -> MatchResult:
         for c in set(self.scores) | set(other.scores) | set(self.n_gt) | set(other.n_gt):
             for name in ("scores", "order", "tp"):
                 d, o = getattr(self, name), getattr(other, name)

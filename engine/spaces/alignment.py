@@ -67,7 +67,7 @@ class AlignmentSettings:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "AlignmentSettings":
+    def from_dict(cls, d: dict[str, Any]) -> AlignmentSettings:
         known = {f.name for f in dataclasses.fields(cls)}
         return cls(**{k.replace("-", "_"): v for k, v in d.items() if k.replace("-", "_") in known})
 
@@ -119,7 +119,7 @@ class Frame:
                 "origin": [float(v) for v in self.origin]}
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "Frame":
+    def from_json(cls, d: dict[str, Any]) -> Frame:
         return cls(float(d["yaw"]), tuple(float(v) for v in d["origin"]))
 
 

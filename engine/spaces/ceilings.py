@@ -134,7 +134,7 @@ class CeilingSettings:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "CeilingSettings":
+    def from_dict(cls, d: dict[str, Any]) -> CeilingSettings:
         known = {f.name for f in dataclasses.fields(cls)}
         d = {k.replace("-", "_"): v for k, v in d.items()}
         types = {f.name: f.type for f in dataclasses.fields(cls)}

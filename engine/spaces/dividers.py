@@ -121,7 +121,7 @@ class DividerSettings:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "DividerSettings":
+    def from_dict(cls, d: dict[str, Any]) -> DividerSettings:
         known = {f.name for f in dataclasses.fields(cls)}
         d = {k.replace("-", "_"): v for k, v in d.items()}
         d = {k: v for k, v in d.items() if k in known}

@@ -40,7 +40,7 @@ class Grid:
     shift: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @classmethod
-    def for_store(cls, store, frame: Frame, bin_width: float, z_bin: float | None = None) -> "Grid":
+    def for_store(cls, store, frame: Frame, bin_width: float, z_bin: float | None = None) -> Grid:
         shift = tuple(float(a - b) for a, b in zip(frame.origin, store.meta.origin))
         return cls(frame, float(bin_width), float(z_bin or bin_width), shift)
 
@@ -168,7 +168,7 @@ class BoxIndex:
     flat: np.ndarray | None = None
 
     @classmethod
-    def build(cls, floors: np.ndarray, boxes: np.ndarray) -> "BoxIndex":
+    def build(cls, floors: np.ndarray, boxes: np.ndarray) -> BoxIndex:
         floors = np.asarray(floors, dtype=np.int64).reshape(-1, 2)
         boxes = np.asarray(boxes, dtype=np.int64).reshape(-1, 5)
         ubs, vbs, tables = [], [], []

@@ -166,7 +166,7 @@ class SpaceSettings:
                           self.min_open_ratio, self.min_scanned_density)
 
     @classmethod
-    def from_config(cls, **overrides: Any) -> "SpaceSettings":
+    def from_config(cls, **overrides: Any) -> SpaceSettings:
         """The parameters under ``buildingparser.spaces`` in dask.config, with overrides."""
         kw = config.settings_fields(cls, "spaces")  # walls, slabs, alignment, ridges, ceilings: their sections
         kw.update(overrides)
@@ -267,7 +267,7 @@ class SpaceParse:
             "stats": self.stats, "params": self.params})
 
     @classmethod
-    def from_doc(cls, d: dict[str, Any]) -> "SpaceParse":
+    def from_doc(cls, d: dict[str, Any]) -> SpaceParse:
         spaces = []
         for s in d["spaces"]:
             nbs = [Neighbour(n["space"], [Face(**f) for f in n["faces"]]) for n in s["neighbours"]]
@@ -279,7 +279,7 @@ class SpaceParse:
                    stats=d.get("stats", {}), params=d.get("params", {}))
 
     @classmethod
-    def load(cls, store: TileStore) -> "SpaceParse":
+    def load(cls, store: TileStore) -> SpaceParse:
         """The parse stored in a tile store's ``meta/spaces``."""
         doc = store.doc(DOC)
         if doc is None:
@@ -432,7 +432,7 @@ class _RefinedPlan:
 
     @classmethod
     def build(cls, cells: list[Box], edges: list[Edge], labels: np.ndarray, refs: list[Refinement],
-              frame: Frame | None = None, bin_width: float = 0.01) -> "_RefinedPlan":
+              frame: Frame | None = None, bin_width: float = 0.01) -> _RefinedPlan:
         kept = [r for r in refs if r.n_spaces >= 2]
         ref_of = {r.space: k for k, r in enumerate(kept)}
         n_old = int(labels.max()) + 1 if len(labels) and labels.max() >= 0 else 0

@@ -31,14 +31,22 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
 from scipy import ndimage
 
-from engine.spaces.alignment import (AlignmentSettings, Frame, block_sum, coarse_yaw, density_image, orientation_field,
-                              parabolic_peak, refine_angles, refine_sample, tile_evidence)
+from engine.spaces.alignment import (
+    AlignmentSettings,
+    Frame,
+    block_sum,
+    coarse_yaw,
+    density_image,
+    orientation_field,
+    parabolic_peak,
+    refine_angles,
+    refine_sample,
+    tile_evidence,
+)
 from engine.spaces.histograms import BoxIndex, Grid
 from engine.spaces.slicing import Box, FoundDivider
-
 
 # -- a tile store in memory ------------------------------------------------------------------------------
 
@@ -473,10 +481,9 @@ def refine_spaces(items: list[dict[str, Any]], store, index: BoxIndex, grid: Gri
     pieces of its points, one per worker thread (:class:`PieceStore`; most of
     the rest of the task).  Without a client: one after another here.
     """
-    from tiles.tasks import run_tasks
-
     from engine import config
     from engine.spaces.histograms import share
+    from tiles.tasks import run_tasks
 
     keys = [it["space"] for it in items]
     if client is None or not items:

@@ -93,7 +93,7 @@ class RidgeSettings:
         return max(1, int(round(metres / bin_width)))
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "RidgeSettings":
+    def from_dict(cls, d: dict[str, Any]) -> RidgeSettings:
         known = {f.name for f in dataclasses.fields(cls)}
         d = {k.replace("-", "_"): v for k, v in d.items()}
         return cls(**{k: float(v) for k, v in d.items() if k in known})
@@ -295,7 +295,7 @@ class Occupancy:
 
     @classmethod
     def build(cls, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray, band_z: int, pixel: int,
-              max_span: int | None = None) -> "Occupancy":
+              max_span: int | None = None) -> Occupancy:
         """From points' bins; ``band_z``: the first z bin of the upper band; ``pixel`` in bins.
 
         With ``max_span`` (z bins) a pixel counts only where its upper-band

@@ -37,8 +37,15 @@ from typing import Any
 import numpy as np
 
 from engine.spaces.dividers import Divider, DividerSettings, detect_dividers, empty_runs
-from engine.spaces.histograms import (BoxIndex, Grid, histogram_pass, segment_histograms, share, tile_extents,
-                               tiles_touching)
+from engine.spaces.histograms import (
+    BoxIndex,
+    Grid,
+    histogram_pass,
+    segment_histograms,
+    share,
+    tile_extents,
+    tiles_touching,
+)
 from tiles.tasks import run_tasks
 
 AXES = ("u", "v", "z")
@@ -62,7 +69,7 @@ class Box:
     def range(self, axis: int) -> tuple[int, int]:
         return (self.u0, self.u1) if axis == 0 else (self.v0, self.v1)
 
-    def with_range(self, axis: int, a: int, b: int, **kw: Any) -> "Box":
+    def with_range(self, axis: int, a: int, b: int, **kw: Any) -> Box:
         r = dict(u0=a, u1=b) if axis == 0 else dict(v0=a, v1=b)
         return dataclasses.replace(self, **r, **kw)
 
@@ -96,7 +103,7 @@ class FoundDivider:
         return out
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "FoundDivider":
+    def from_json(cls, d: dict[str, Any]) -> FoundDivider:
         return cls(**{f.name: d[f.name] for f in dataclasses.fields(cls) if f.name in d})
 
 

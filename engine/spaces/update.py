@@ -87,7 +87,7 @@ class UpdateSettings:
             raise ValueError(f"divider-share must be in (0, 1], not {self.divider_share}")
 
     @classmethod
-    def from_config(cls, **overrides: Any) -> "UpdateSettings":
+    def from_config(cls, **overrides: Any) -> UpdateSettings:
         """``buildingparser.space-update.*`` with keyword overrides (None = use the setting)."""
         c = config.settings_fields(cls, "space-update")
         c.update({k: v for k, v in overrides.items() if v is not None})

@@ -67,7 +67,7 @@ def building_style(rng: np.random.Generator) -> dict:
     }
 
 
-def space_colours(rng: np.random.Generator, space: "Space", style: dict) -> None:
+def space_colours(rng: np.random.Generator, space: Space, style: dict) -> None:
     """Per-space colours and scan character (density factor x0.5-x2, noise 2-6 mm, brightness)."""
     wall = style["wall"] if rng.random() < 0.7 else pick(rng, WALLS)
     if space.type in ("WC", "storage") or rng.random() < 0.25:

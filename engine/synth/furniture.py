@@ -378,7 +378,7 @@ def _wall_clutter(p: Placer) -> None:
 
 def _radiators(p: Placer, walls: list[Wall]) -> None:
     """Radiators (clutter) under most windows."""
-    for i, ed in enumerate(p.edges):
+    for _i, ed in enumerate(p.edges):
         for s0, s1, o in ed["openings"]:
             if o.kind != "window" or p.rng.random() < 0.3:
                 continue

@@ -23,8 +23,8 @@ from shapely.geometry import box
 
 from engine import config
 from engine.synth import colours, furniture, shapes, structure
-from engine.synth.hard import plan as hard_plan
 from engine.synth.building import Building, Element, FloorInfo, Frame, Opening, PartSpec, Space, Wall
+from engine.synth.hard import plan as hard_plan
 from engine.synth.hard.elements import stair_scanners
 from engine.synth.hard.hardness import HardContext, Hardness, hard_rng
 from engine.synth.layout import CIRCULATION, Draft, floor_layout

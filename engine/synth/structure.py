@@ -219,7 +219,7 @@ def _non_convex(space: Space) -> bool:
 
 def _partial_wall(w: Wall, cols: dict) -> Element:
     """A wall inside an open-plan space: a solid box from the wall it leans on to its free end."""
-    d, n = w.direction, w.normal
+    d, _n = w.direction, w.normal
     s0, s1 = w.ext0, w.length - w.ext1
     mid = np.asarray(w.p0) + d * (s0 + s1) / 2
     b = Box(np.array([mid[0], mid[1], (w.z0 + w.z1) / 2]), np.array([s1 - s0, w.thickness, w.z1 - w.z0]),

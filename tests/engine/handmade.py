@@ -80,7 +80,7 @@ def sample(plan: Plan, *, density: float = 300.0, seed: int = 0, clutter: bool =
                     r.y0 + bd / 2, max(r.y0 + bd / 2, r.y1 - bd / 2))
                 add(_box(rng, cx, cy, z0, bw, bd, bh, density), k)
     # doors: jambs and threshold inside the wall void, labelled as the first room
-    for (a, b, pos, width), (axis, at, b0, b1, top, _) in zip(plan.doors, openings):
+    for (a, _b, _pos, width), (axis, at, b0, b1, top, _) in zip(plan.doors, openings):
         ra = plan.rooms[a]
         z0 = ra.floor * plan.storey
         n = rng.poisson(density * width * plan.wall)

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 import zarr
 
-from tiles.zarrio import tile_compressor
-from tiles.zarrio import CHUNK_KEY_ENCODING, array_files, write_array
+from tiles.zarrio import CHUNK_KEY_ENCODING, array_files, tile_compressor, write_array
 
 DTYPES = ["uint8", "int8", "uint16", "int16", "uint32", "int32", "int64", "uint64", "float32", "float64"]
 
@@ -32,7 +31,8 @@ def test_zarr_reads_back_every_value_and_metadata_matches(tmp_path, dtype, n):
     fast_meta = json.loads((tmp_path / "g" / "fast" / "zarr.json").read_text())
     ref_meta = json.loads((tmp_path / "g" / "ref" / "zarr.json").read_text())
     assert fast_meta == ref_meta
-    chunks = lambda a: sorted(os.listdir(tmp_path / "g" / a))
+    def chunks(a):
+        return sorted(os.listdir(tmp_path / "g" / a))
     assert chunks("fast") == chunks("ref")
     assert not (tmp_path / "g" / "fast" / "c").exists()  # chunks beside zarr.json: no folder of their own
 

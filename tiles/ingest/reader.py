@@ -92,7 +92,7 @@ class PartResult:
     columns: dict[str, np.ndarray]
     stats: dict[str, Any] = field(default_factory=dict)
     records: np.ndarray | None = None
-    unpack: Callable[[np.ndarray], "PartResult"] | None = None
+    unpack: Callable[[np.ndarray], PartResult] | None = None
 
 
 class Reader:

@@ -23,10 +23,19 @@ from tiles.config import setting
 from tiles.errors import UserError
 from tiles.groundtruth import GTElement, GTSpace, gt_dimensions
 from tiles.ingest.files import file_size, is_dir, listdir, open_binary
-from tiles.ingest.reader import PartResult, Quantization, Reader
 from tiles.ingest.lines import BlockStats
-from tiles.ingest.text import (Sniff, bad_line_policy, color_dimensions, defect_warnings, line_number, parse_lines,
-                               points_columns, read_lines_block, sniff)
+from tiles.ingest.reader import PartResult, Quantization, Reader
+from tiles.ingest.text import (
+    Sniff,
+    bad_line_policy,
+    color_dimensions,
+    defect_warnings,
+    line_number,
+    parse_lines,
+    points_columns,
+    read_lines_block,
+    sniff,
+)
 from tiles.schema import coordinate_dimensions
 
 _ANNOTATION = re.compile(r"^(?P<cls>.+?)_(?P<num>\d+)(?P<dup> \(\d+\))?\.txt$")

@@ -135,11 +135,11 @@ class Hardness:
         return {n: getattr(self, n) for n in NAMES if getattr(self, n) > 0}
 
     @classmethod
-    def all(cls, level: float = 1.0) -> "Hardness":
+    def all(cls, level: float = 1.0) -> Hardness:
         return cls(**{n: level for n in NAMES})
 
     @classmethod
-    def parse(cls, spec: "Hardness | str | Iterable[str] | Mapping[str, float] | None") -> "Hardness":
+    def parse(cls, spec: Hardness | str | Iterable[str] | Mapping[str, float] | None) -> Hardness:
         """A :class:`Hardness` from any of the accepted forms (one-line :class:`UserError` on a mistake).
 
         ``None``, ``""``, ``"none"``: nothing; ``"all"``: everything at level 1;
@@ -175,7 +175,7 @@ class Hardness:
             levels[key] = v
         return cls(**levels)
 
-    def replace(self, **levels: float) -> "Hardness":
+    def replace(self, **levels: float) -> Hardness:
         return dataclasses.replace(self, **levels)
 
 

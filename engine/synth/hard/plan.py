@@ -95,7 +95,7 @@ class Geometry:
     seed: int = 0
 
     @classmethod
-    def plan(cls, seed: int, h: Hardness, layouts: list[FloorLayout], area_per_floor: float) -> "Geometry":
+    def plan(cls, seed: int, h: Hardness, layouts: list[FloorLayout], area_per_floor: float) -> Geometry:
         L, D = layouts[0].length, layouts[0].depth
         g = cls(L, D, seed=seed)
         if h.on("oblique"):

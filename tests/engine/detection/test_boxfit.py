@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from engine.detection import boxfit as bf
+
+
 def _plane(axis: int, at: float, lo: np.ndarray, hi: np.ndarray, n: int = 400, seed: int = 0) -> np.ndarray:
     """Points on the plane ``x[axis] == at`` spread over the box's extent on the other axes."""
     rng = np.random.default_rng(seed)

@@ -8,9 +8,9 @@ import pytest
 
 from engine.cli import main
 from engine.detection.detect import DetectionSettings, detect, refine_extent, surface_shift
-from engine.outputs.labels import label_points, read_elements_json, write_elements_json
-from engine.metrics.detection import box_iou_3d, boxes_array, evaluate_detections
 from engine.detection.model import Model, default_model_path
+from engine.metrics.detection import box_iou_3d, boxes_array, evaluate_detections
+from engine.outputs.labels import label_points, read_elements_json, write_elements_json
 from engine.synth import generate
 from tiles.classes import CLASS_CODES
 from tiles.store import open_store

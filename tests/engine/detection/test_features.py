@@ -6,8 +6,17 @@ import pytest
 
 from engine.detection import moments as mom
 from engine.detection.canonical import CanonicalFrame
-from engine.detection.features import (COLOUR_TARGET, FeatureLayout, SpaceVolume, global_features, global_scores, local_features,
-                             normalise_colours, tent_code, window_features)
+from engine.detection.features import (
+    COLOUR_TARGET,
+    FeatureLayout,
+    SpaceVolume,
+    global_features,
+    global_scores,
+    local_features,
+    normalise_colours,
+    tent_code,
+    window_features,
+)
 from engine.detection.sliding import axis_positions, non_maximum_suppression, score_windows
 
 

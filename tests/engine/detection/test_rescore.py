@@ -94,8 +94,9 @@ def test_apply_rescores_only_enabled_classes():
 
 
 def test_model_with_rescorer_round_trips_and_older_models_have_none(tmp_path):
-    from engine.detection.model import load_model
     from tests.engine.test_model import _model
+
+    from engine.detection.model import load_model
 
     m = _model()
     rng = np.random.default_rng(3)

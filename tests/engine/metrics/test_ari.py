@@ -5,8 +5,14 @@ import numpy as np
 import pytest
 from sklearn.metrics import adjusted_rand_score
 
-from engine.metrics.ari import (ari, ari_from_contingency, contingency_pairs, contingency_table,
-                                distributed_ari, sum_pairs)
+from engine.metrics.ari import (
+    ari,
+    ari_from_contingency,
+    contingency_pairs,
+    contingency_table,
+    distributed_ari,
+    sum_pairs,
+)
 from tiles.schema import Dimension
 
 

@@ -6,8 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from engine.metrics.detection import (PointEvaluation, average_precision, box_iou_3d, evaluate_detections,
-                                      evaluate_detections_serial, match_detections, partition_for_matching)
+from engine.metrics.detection import (
+    PointEvaluation,
+    average_precision,
+    box_iou_3d,
+    evaluate_detections,
+    evaluate_detections_serial,
+    match_detections,
+    partition_for_matching,
+)
 from tiles.classes import CLASS_CODES
 
 

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from engine.outputs.labels import _boxes, label_arrays, read_elements_json, write_elements_json
 from engine.detection.proposals import Proposal
+from engine.outputs.labels import _boxes, label_arrays, read_elements_json, write_elements_json
 
 
 def _prop(eid, cls, score, center, size, yaw=0.0, occ=None):

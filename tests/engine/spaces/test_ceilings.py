@@ -150,8 +150,8 @@ def _refined_spaces(pts: np.ndarray, ceilings: CeilingSettings) -> int:
     """Spaces of the refinement of one storey (floor at z 0, upper band from 2.2 m) parsed from ``pts``."""
     from engine.spaces.alignment import Frame
     from engine.spaces.histograms import Grid
-    from engine.spaces.refine import MemoryStore, _parse_part
     from engine.spaces.parse import SpaceSettings
+    from engine.spaces.refine import MemoryStore, _parse_part
 
     raw = {a: np.round(pts[:, i] / 0.001).astype(np.int64) for i, a in enumerate("xyz")}
     mem = MemoryStore(raw, (0.001,) * 3, (0.0,) * 3, (0.0, 0.0, 0.0))
@@ -235,6 +235,7 @@ def test_partition_support_counts_the_stretches_with_a_point_near_the_line():
 
 def test_step_lines_need_the_points_for_the_partition_test():
     import pytest
+
     from engine.spaces.ceilings import step_lines
     from engine.spaces.ridges import RidgeSettings
 

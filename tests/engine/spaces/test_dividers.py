@@ -4,8 +4,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.spaces.dividers import (DividerSettings, bank_responses, detect_dividers, empty_runs, max_pool,
-                             non_maximum_suppression, occupied_extent, vertical_params)
+from engine.spaces.dividers import (
+    DividerSettings,
+    bank_responses,
+    detect_dividers,
+    empty_runs,
+    max_pool,
+    non_maximum_suppression,
+    occupied_extent,
+    vertical_params,
+)
 
 BW = 0.01
 

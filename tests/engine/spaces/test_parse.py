@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from engine.metrics.ari import distributed_ari
-from engine.spaces.parse import SpaceSettings, SpaceParse, parse_spaces
 from engine.outputs.geojson import write_spaces_geojson
+from engine.spaces.parse import SpaceParse, SpaceSettings, parse_spaces
 from tests.engine.handmade import Plan, Room, corridor_plan, sample, transform, write_store
 
 
@@ -199,9 +199,9 @@ def test_refinement_on_the_cluster_equals_the_serial_one(winged, client, monkeyp
     pieces of their points on the workers (refine-pieces-points), with the bins kept by the memory stores,
     give the parse of the serial refinement that reads each space in one go and computes the bins per pass."""
     import dask
+    from distributed import get_task_stream
 
     import engine.spaces.refine as refine
-    from distributed import get_task_stream
 
     def parsed():
         return ({k: v for k, v in p.to_doc().items() if k != "stats"},

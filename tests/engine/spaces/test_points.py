@@ -63,5 +63,5 @@ def test_load_space_equals_selecting_from_whole_tiles_and_reads_only_the_span():
     rows = np.nonzero(store.tiles["a"]["space_id"] == 1)[0]
     span = (int(rows[0]), int(rows[-1]) + 1)
     assert span[1] - span[0] < 0.5 * len(store.tiles["a"]["space_id"])
-    for tile, cols, start, stop in store.reads:
+    for _tile, cols, start, stop in store.reads:
         assert (start, stop) == ((None, None) if cols == ("space_id",) else span)

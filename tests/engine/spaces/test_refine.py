@@ -7,8 +7,7 @@ import numpy as np
 
 from engine.spaces.alignment import AlignmentSettings, Frame
 from engine.spaces.histograms import Grid
-from engine.spaces.refine import (MemoryStore, Part, Refinement, frame_regions, relabel, space_yaw,
-                           two_orientations)
+from engine.spaces.refine import MemoryStore, Part, Refinement, frame_regions, relabel, space_yaw, two_orientations
 
 
 def _room_walls(x0: float, y0: float, x1: float, y1: float, step: float, rng, per_m: int = 400) -> np.ndarray:

@@ -5,9 +5,9 @@ import numpy as np
 
 from engine.spaces.alignment import Frame
 from engine.spaces.merging import Edge
+from engine.spaces.parse import _RefinedPlan
 from engine.spaces.refine import Part, Refinement
 from engine.spaces.slicing import Box
-from engine.spaces.parse import _RefinedPlan
 
 BW = 0.01
 FRAME = Frame(0.0, (0.0, 0.0, 0.0))
