@@ -61,7 +61,7 @@ def run(quick: bool = False, only: list[str] | None = None) -> dict[str, Any]:
             store = opener(client)
             out = os.path.join(cache_dir(), "update-" + os.path.basename(store.url.rstrip("/")))
             m = run_building(store.url, out, client=client,
-                             options=RunSettings(model=model, export_points=False, say=lambda s: None))
+                             options=RunSettings(model=model, export_points=False))
             s = m["spaces"]
             rows.append({"building": name, "spaces_before": s["count_before_update"], "spaces_after": s["count"],
                          "ari_before_update": round(s["ari_before_update"], 4), "ari_final": round(s["ari"], 4),

@@ -108,9 +108,8 @@ def test_fit_stays_off_when_the_points_say_nothing_or_samples_are_few():
 
 
 def test_model_with_box_regression_round_trips_and_old_models_have_none(tmp_path):
-    from tests.engine.test_model import _model
-
     from engine.detection.model import load_model
+    from tests.engine.detection.test_model import _model
 
     m = _model()
     rng = np.random.default_rng(2)

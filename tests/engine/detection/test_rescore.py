@@ -94,9 +94,8 @@ def test_apply_rescores_only_enabled_classes():
 
 
 def test_model_with_rescorer_round_trips_and_older_models_have_none(tmp_path):
-    from tests.engine.test_model import _model
-
     from engine.detection.model import load_model
+    from tests.engine.detection.test_model import _model
 
     m = _model()
     rng = np.random.default_rng(3)
