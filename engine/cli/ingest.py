@@ -18,6 +18,11 @@ Inputs (local paths or fsspec URLs such as s3://bucket/scan.laz):
   .txt .xyz .pts .csv .asc
                       one point per line: x y z or x y z r g b (space or comma)
   .e57                every scan with its pose applied (needs pye57)
+  .ply                the vertices, binary or ASCII, every property kept (colour as
+                      LAS colour, a 16-bit intensity as LAS intensity, the rest as
+                      extra dimensions); a mesh's faces are not points
+  .pcd                PCL's ascii, binary and binary_compressed; packed rgb as
+                      colour, every other field as an extra dimension
 
 Several inputs go into one store in the order given; see 'tiles.ingest' for how
 different point formats and scales are combined.  Points read = points stored,

@@ -34,7 +34,7 @@ examples:
 
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", metavar="INPUT",
-                   help="point cloud (.las/.laz, .txt/.xyz/.pts, .e57, an S3DIS Area folder) or a tile store")
+                   help="point cloud (.las/.laz, .ply, .pcd, .txt/.xyz/.pts, .e57, an S3DIS Area folder) or a tile store")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--model", metavar="MODEL",
                    help="detection model (MODEL.npz + MODEL.json); default: the shipped model")

@@ -42,6 +42,8 @@ def default_part_points() -> int:
 def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None = None) -> list[Reader]:
     """A reader per source (an S3DIS folder of areas gives one per area), checked on the driver."""
     from tiles.ingest.e57 import EXTENSIONS as E57_EXT
+    from tiles.ingest.pcd import EXTENSIONS as PCD_EXT
+    from tiles.ingest.ply import EXTENSIONS as PLY_EXT
     from tiles.ingest.text import EXTENSIONS as TEXT_EXT
 
     readers: list[Reader] = []
@@ -49,7 +51,7 @@ def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None 
         path = paths.normalize(src)
         ext = os.path.splitext(path.lower())[1]
         if is_dir(path, storage_options):
-            if ext in LAS_EXTENSIONS + TEXT_EXT + E57_EXT:
+            if ext in LAS_EXTENSIONS + TEXT_EXT + E57_EXT + PLY_EXT + PCD_EXT:
                 raise UserError(path, f"is a directory, expected a {ext} file")
             from tiles.ingest.s3dis import readers_for
 
@@ -67,11 +69,19 @@ def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None 
             from tiles.ingest.e57 import E57Reader
 
             readers.append(E57Reader(path, storage_options))
+        elif ext in PLY_EXT:
+            from tiles.ingest.ply import PlyReader
+
+            readers.append(PlyReader(path, storage_options))
+        elif ext in PCD_EXT:
+            from tiles.ingest.pcd import PcdReader
+
+            readers.append(PcdReader(path, storage_options))
         else:
             if not paths.exists(path, storage_options):
                 raise UserError(path, "no such file or folder")
             raise UserError(path, f"unknown extension {ext or '(none)'!r}: expected .las, .laz, "
-                                  + ", ".join(TEXT_EXT + E57_EXT) + " or an S3DIS folder")
+                                  + ", ".join(TEXT_EXT + E57_EXT + PLY_EXT + PCD_EXT) + " or an S3DIS folder")
     if not readers:
         raise UserError(None, "no input given")
     return readers
