@@ -46,6 +46,64 @@ def store_info(store: TileStore) -> dict[str, Any]:
     }
 
 
+def file_info(path: str, storage_options: dict[str, Any] | None = None) -> dict[str, Any]:
+    """What a point cloud file (LAS/LAZ, PLY, PCD, E57, text) or S3DIS folder holds, read from its header only.
+
+    The same reader as ingest checks it (a file ingest would refuse is refused
+    here, with the same one-line error); nothing is decoded but the header.
+    """
+    from tiles.ingest import open_sources
+
+    out = []
+    for r in open_sources([path], storage_options):
+        grid = r.native_grid()
+        d: dict[str, Any] = {
+            "path": r.path, "format": r.format, "points": r.expected_count,
+            "dimensions": [{"name": x.name, "dtype": x.dtype, "kind": x.kind, "description": x.description}
+                           for x in r.dimensions],
+            "crs": r.crs(),
+            "grid": None if grid is None else {"scale": list(grid.scale), "offset": list(grid.offset)},
+            "details": r.source_info([]),
+        }
+        if r.format in ("las", "laz"):
+            d["bounds"] = _las_bounds(r.path, storage_options)
+        out.append(d)
+    return {"path": path, "sources": out}
+
+
+def _las_bounds(path: str, storage_options: dict[str, Any] | None) -> dict[str, list[float]]:
+    import laspy
+
+    from tiles.ingest.files import open_binary
+
+    with open_binary(path, storage_options) as f, laspy.open(f) as las:
+        return {"min": [float(v) for v in las.header.mins], "max": [float(v) for v in las.header.maxs]}
+
+
+def format_file_info(info: dict[str, Any]) -> str:
+    """The human-readable form of :func:`file_info`."""
+    lines = []
+    for s in info["sources"]:
+        n = f"{s['points']:,} points" if s["points"] is not None else "points counted when read"
+        lines.append(f"file        {s['path']} ({s['format']}, {n})")
+        if s.get("bounds"):
+            b = s["bounds"]
+            lines.append("bounds      " + " ".join(f"{v:.3f}" for v in b["min"]) + "  to  "
+                         + " ".join(f"{v:.3f}" for v in b["max"]))
+        if s["grid"]:
+            lines.append(f"grid        scale {s['grid']['scale']} offset {s['grid']['offset']}")
+        if s["crs"]:
+            c = s["crs"]
+            lines.append("crs         " + (f"EPSG:{c['epsg']}" if c.get("epsg") else ("WKT" if c.get("wkt")
+                                                                                       else "GeoTIFF keys")))
+        kinds: dict[str, list[str]] = {}
+        for d in s["dimensions"]:
+            kinds.setdefault(d["kind"], []).append(d["name"])
+        for kind, names in kinds.items():
+            lines.append(f"{kind.replace('_', ' '):<12}" + ", ".join(names))
+    return "\n".join(lines)
+
+
 def _documents(store: TileStore) -> list[str]:
     try:
         g = store.group["meta"]

@@ -37,3 +37,39 @@ def test_info_lists_results(shared_data, tmp_path):
     assert info["ground_truth"]["spaces"] is None
     assert info["las"]["point_format"] == 3 and info["sources"][0]["format"] == "las"
     assert "results     space_id" in format_info(info)
+
+
+def test_info_describes_point_cloud_files_from_their_header(tmp_path):
+    import laspy
+    import numpy as np
+
+    from tiles.info import file_info, format_file_info
+
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+    las.x, las.y, las.z = np.array([1.0, 4.0]), np.array([2.0, 7.5]), np.array([0.0, 3.0])
+    p = tmp_path / "a.laz"
+    las.write(str(p))
+    info = file_info(str(p))
+    (s,) = info["sources"]
+    assert (s["format"], s["points"]) == ("laz", 2)
+    assert s["bounds"] == {"min": [1.0, 2.0, 0.0], "max": [4.0, 7.5, 3.0]}
+    assert {d["name"] for d in s["dimensions"]} >= {"x", "y", "z", "intensity", "gps_time", "red"}
+    text = format_file_info(info)
+    assert "(laz, 2 points)" in text and "4.000 7.500 3.000" in text
+
+
+def test_info_command_reads_a_file_or_a_store_and_refuses_anything_else_in_one_line(tmp_path, capsys):
+    import numpy as np
+    import plyfile
+
+    from engine.cli import main
+
+    v = np.zeros(3, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("nx", "f4")])
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(tmp_path / "a.ply"))
+    assert main(["info", str(tmp_path / "a.ply")]) == 0
+    out = capsys.readouterr().out
+    assert "(ply, 3 points)" in out and "extra       nx" in out
+    (tmp_path / "b.bin").write_bytes(b"x")
+    assert main(["info", str(tmp_path / "b.bin")]) == 2
+    err = capsys.readouterr().err
+    assert "b.bin" in err and "unknown extension" in err and "Traceback" not in err
