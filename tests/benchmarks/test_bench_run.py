@@ -45,3 +45,20 @@ def test_repeat_must_be_a_positive_count():
 
     with pytest.raises(ValueError, match="repeat"):
         run(repeat=0)
+
+
+def test_stages_are_reported_as_multiples_of_the_median_decode_with_their_efficiency():
+    from benchmarks.bench_run import decode_table
+
+    stages = {"spaces": [9.0, 11.0, 10.0], "detection": [30.0, 28.0, 40.0], "export": [5.0, 5.0, 5.0],
+              "whole run": [60.0, 70.0, 65.0]}
+    profile = [{"stage": "spaces", "wall_s": 10.0, "worker_cpu_s": 15.0},
+               {"stage": "detection", "wall_s": 30.0, "worker_cpu_s": 57.0},
+               {"stage": "export", "wall_s": 5.0, "worker_cpu_s": 5.0}]
+    rows = {r["stage"]: r for r in decode_table(stages, [5.0, 4.0, 6.0], profile, workers=2)}  # median decode 5 s
+    assert rows["spaces"]["x_decode"] == 2.0 and rows["spaces"]["met"] is True
+    assert rows["detection"]["x_decode"] == 6.0 and rows["detection"]["met"] is False  # target 3x
+    assert rows["whole run"]["x_decode"] == 13.0 and rows["whole run"]["target_x"] == 8.0
+    assert rows["spaces"]["parallel_efficiency"] == 0.75 and rows["detection"]["parallel_efficiency"] == 0.95
+    assert rows["export"]["parallel_efficiency"] == 0.5
+    assert rows["whole run"]["parallel_efficiency"] == round(77.0 / (2 * 45.0), 2)
