@@ -7,7 +7,7 @@
 ``points.laz``     every input point in input order with its input dimensions, plus
                    ``classification``, ``space_id``, ``element_id`` (:mod:`tiles.export`)
 ``spaces.geojson`` one feature per space, world coordinates, with the space statistics
-``floorplan.png``  the top view of the spaces and dividers
+``floorplan.png``  the plan per storey (and ``floorplan.svg``): spaces, walls, doors, windows (:mod:`engine.outputs.plan`)
 ``elements.json``  the detected elements after the CRF (:mod:`engine.detection.proposals`)
 ``metrics.json``   counts, ARI and AP when the input has ground truth, timings (:mod:`engine.outputs.report`)
 ``report.html``    all of it on one page that opens with no server
