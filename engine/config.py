@@ -75,6 +75,8 @@ SETTINGS: dict[str, Any] = {
         "batch-tiles": "int >= 1",
         "floorplan": {"min-pixel": "float > 0", "max-pixels": "int >= 1"},
     },
+    # engine/outputs/outputs.yaml
+    "outputs": {"viewer": "bool", "viewer-max-points": "int >= 1"},
     # engine/spaces/update.yaml
     "space-update": {
         "coverage": "float in (0, 1]", "distance": "float >= 0", "max-angle": "float in [0, 90]",

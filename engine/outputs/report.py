@@ -58,8 +58,8 @@ from tiles.classes import ELEMENT_CLASSES
 REPORT = "report.html"
 #: CRF solver statuses of spaces solved exactly (see :mod:`engine.crf.model`).
 SOLVED = ("OPTIMAL", "TRIVIAL", "EMPTY")
-OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "elements.json", "metrics.json",
-           "dask-report.html")
+OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "viewer.html", "elements.json",
+           "metrics.json", "dask-report.html")
 
 _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:2rem auto;max-width:72rem;
@@ -100,6 +100,10 @@ def fmt_pct(v: Any) -> str:
     return "n/a" if _missing(v) else f"{100 * float(v):.2f}"
 
 
+class Html(str):
+    """A table cell that is already HTML (a link made here), not escaped again."""
+
+
 def _table(tid: str, header: Sequence[str], rows: Sequence[Sequence[str]], *, total: Sequence[str] | None = None,
            caption: str | None = None) -> str:
     """An HTML table; cells are already-formatted strings (escaped here)."""
@@ -108,7 +112,7 @@ def _table(tid: str, header: Sequence[str], rows: Sequence[Sequence[str]], *, to
         out.append(f"<caption class=\"note\">{_esc(caption)}</caption>")
     out.append("<thead><tr>" + "".join(f"<th>{_esc(h)}</th>" for h in header) + "</tr></thead><tbody>")
     for r in rows:
-        out.append("<tr>" + "".join(f"<td>{_esc(c)}</td>" for c in r) + "</tr>")
+        out.append("<tr>" + "".join(f"<td>{c if isinstance(c, Html) else _esc(c)}</td>" for c in r) + "</tr>")
     if total is not None:
         out.append('<tr class="total">' + "".join(f"<td>{_esc(c)}</td>" for c in total) + "</tr>")
     out.append("</tbody></table></div>")
@@ -156,7 +160,7 @@ def _update_rows(u: dict[str, Any] | None) -> list[list[str]]:
     return rows
 
 
-def _stats_section(stats: dict[str, Any] | None) -> str:
+def _stats_section(stats: dict[str, Any] | None, viewer: str | None = None) -> str:
     if not stats or not stats.get("spaces"):
         return '<p class="note">No space statistics (spaces.geojson or elements.json missing).</p>'
     total = stats["total"]
@@ -164,7 +168,9 @@ def _stats_section(stats: dict[str, Any] | None) -> str:
     header = ["space", "area (m²)", "perimeter (m)", "height (m)", "points", *classes, "window/wall"]
     rows = []
     for r in stats["spaces"]:
-        rows.append([str(r["id"]), fmt_float(r["area_m2"]), fmt_float(r["perimeter_m"]), fmt_float(r["height_m"]),
+        sid = (Html(f'<a href="{_esc(viewer)}#space={int(r["id"])}" title="open in the 3D view">{int(r["id"])}</a>')
+               if viewer else str(r["id"]))
+        rows.append([sid, fmt_float(r["area_m2"]), fmt_float(r["perimeter_m"]), fmt_float(r["height_m"]),
                      fmt_int(r["points"]), *[fmt_int(r["elements"][c]) for c in classes],
                      fmt_float(r["window_to_wall"], 3)])
     tot = ["total", fmt_float(total["area_m2"]), fmt_float(total["perimeter_m"]), "", fmt_int(total["points"]),
@@ -249,7 +255,8 @@ def _files_section(files: Sequence[str]) -> str:
 
 def render_report(metrics: dict[str, Any], *, statistics: dict[str, Any] | None = None,
                   floorplan_png: bytes | None = None, floorplan_href: str | None = None,
-                  files: Sequence[str] = (), dask_report: str | None = None, title: str | None = None) -> str:
+                  files: Sequence[str] = (), dask_report: str | None = None, title: str | None = None,
+                  viewer: str | None = None) -> str:
     """The report page as a string (see the module docstring).
 
     Parameters
@@ -264,6 +271,8 @@ def render_report(metrics: dict[str, Any], *, statistics: dict[str, Any] | None 
         Output files to link (relative names).
     dask_report
         Relative name of the dask performance report, when there is one.
+    viewer
+        Relative name of the 3D view (``viewer.html``), when there is one: each space links to it.
     """
     inp = (metrics.get("input") or {}).get("path")
     title = title or f"buildingparser report: {os.path.basename(str(inp)) if inp else 'run'}"
@@ -272,6 +281,9 @@ def render_report(metrics: dict[str, Any], *, statistics: dict[str, Any] | None 
              f'<p class="meta">Written {_esc(_dt.datetime.now().isoformat(timespec="seconds"))} by buildingparser '
              f"(Armeni et al., 3D Semantic Parsing of Large-Scale Indoor Spaces, CVPR 2016).</p>",
              "<h2>Input</h2>", _input_section(metrics), "<h2>Floor plan</h2>"]
+    if viewer:
+        parts.append(f'<p><a href="{_esc(viewer)}">Open the 3D view</a> (points by class, space or colour; element '
+                     "boxes; each space below links to it).</p>")
     if floorplan_png:
         data = base64.b64encode(floorplan_png).decode("ascii")
         parts.append(f'<img class="plan" alt="floor plan" src="data:image/png;base64,{data}">')
@@ -279,7 +291,7 @@ def render_report(metrics: dict[str, Any], *, statistics: dict[str, Any] | None 
         parts.append(f'<img class="plan" alt="floor plan" src="{_esc(floorplan_href)}">')
     else:
         parts.append('<p class="note">No floor plan picture.</p>')
-    parts += ["<h2>Spaces</h2>", _spaces_section(metrics), "<h2>Space statistics</h2>", _stats_section(statistics),
+    parts += ["<h2>Spaces</h2>", _spaces_section(metrics), "<h2>Space statistics</h2>", _stats_section(statistics, viewer),
               "<h2>Detection</h2>", _detection_section(metrics), "<h2>Contextual consistency (CRF)</h2>",
               _crf_section(metrics), "<h2>Elements</h2>", _elements_section(metrics),
               "<h2>Timings</h2>", _timings_section(metrics), "<h2>Dask performance report</h2>"]
@@ -336,7 +348,7 @@ def write_report(out_dir: str | os.PathLike, *, metrics: dict[str, Any], statist
     files = [n for n in OUTPUTS if os.path.isfile(here(n))]
     page = render_report(metrics, statistics=statistics, floorplan_png=png, floorplan_href=href, files=files,
                          dask_report="dask-report.html" if os.path.isfile(here("dask-report.html")) else None,
-                         title=title)
+                         title=title, viewer="viewer.html" if os.path.isfile(here("viewer.html")) else None)
     path = here(REPORT)
     tmp = path + ".tmp"
     with open(tmp, "w", encoding="utf-8") as f:

@@ -17,6 +17,7 @@ from engine.pipeline.context import STAGES
 from engine.pipeline.documents import cell_lookup
 from engine.pipeline.stages import StageLog
 from tiles import paths
+from tiles.config import setting
 from tiles.store import TileStore
 
 
@@ -131,6 +132,12 @@ def write_plan_outputs(store: TileStore, final, elements, staging: str, client) 
     write_elements_json(elements, os.path.join(staging, "elements.json"))
     draw_plan(layer, records, os.path.join(staging, "floorplan.png"), os.path.join(staging, "floorplan.svg"),
               crs_known=bool(store.meta.crs))
+    if setting("outputs.viewer"):
+        from engine.outputs.viewer import space_counts_from_layer, viewer_points, write_viewer
+
+        counts = space_counts_from_layer(layer, store.meta.point_count)
+        points = viewer_points(store, counts, setting("outputs.viewer-max-points"), client=client)
+        write_viewer(os.path.join(staging, "viewer.html"), points, records, layer)
     return stats
 
 
@@ -191,8 +198,8 @@ def summary_lines(metrics: dict[str, Any], out: str) -> list[str]:
                      f"{pct(d['map_before_crf'])}{ranked}; point mIoU {pct(d['miou'])}")
         lines.append("AP per class: " + ", ".join(f"{k} {pct(v)}" for k, v in d["ap"].items()))
     lines.append("elements: " + (", ".join(f"{k} {v}" for k, v in metrics.get("elements", {}).items()) or "none"))
-    written = [n for n in ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "elements.json",
-                           "metrics.json", "report.html") if n != "points.laz" or metrics.get("points_written", True)]
+    written = [n for n in ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "viewer.html",
+                           "elements.json", "metrics.json", "report.html") if n != "points.laz" or metrics.get("points_written", True)]
     for name in written:
         lines.append(f"{name}: {paths.join(out, name)}")
     return lines
