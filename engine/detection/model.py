@@ -51,7 +51,7 @@ import numpy as np
 
 from engine.detection.boxfit import BoxFit
 from engine.detection.dictionary import WindowDictionary
-from engine.detection.features import FeatureLayout
+from engine.detection.layout import FeatureLayout
 from engine.detection.rescore import Rescorer
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError

@@ -98,7 +98,7 @@ def refine_reveals(lo: np.ndarray, hi: np.ndarray, lo_m: np.ndarray, hi_m: np.nd
     class_code
         ``(n,)`` their classes.
     grid, index
-        The space's :class:`engine.detection.moments.VoxelGrid` and :class:`engine.detection.detect.PointIndex`.
+        The space's :class:`engine.detection.moments.VoxelGrid` and :class:`engine.detection.pointindex.PointIndex`.
     settings
         Default: :meth:`RevealSettings.from_config`.
     """

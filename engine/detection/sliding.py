@@ -39,17 +39,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.detection import moments as mom
-from engine.detection.features import (
-    LOCAL_SIZE,
-    FeatureLayout,
-    SpaceVolume,
-    context_features,
-    context_margin,
-    global_scores,
-    local_features,
-    slab_interval,
-    sub_bounds,
-)
+from engine.detection.context_block import context_features, context_margin, slab_interval
+from engine.detection.global_block import global_scores
+from engine.detection.layout import FeatureLayout
+from engine.detection.local_block import LOCAL_SIZE, local_features, sub_bounds
+from engine.detection.volume import SpaceVolume
 
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000

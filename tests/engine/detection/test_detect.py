@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 
 from engine.cli import main
-from engine.detection.detect import DetectionSettings, detect, refine_extent, surface_shift
+from engine.detection.detect import detect
 from engine.detection.model import Model, default_model_path
-from engine.metrics.detection import box_iou_3d, boxes_array, evaluate_detections
+from engine.detection.settings import DetectionSettings
+from engine.detection.surfaces import refine_extent, surface_shift
+from engine.metrics.boxes import box_iou_3d, boxes_array
+from engine.metrics.detection import evaluate_detections
 from engine.outputs.labels import label_points, read_elements_json, write_elements_json
 from engine.synth import generate
 from tiles.classes import CLASS_CODES
@@ -198,7 +201,7 @@ def test_default_model_loads():
 
 def test_a_spaces_one_ceiling_is_its_highest_window_and_its_floor_its_lowest():
     """``surface-choice``: a table-top plane or a beam's underside that outscores the ceiling is not the ceiling."""
-    from engine.detection.detect import surface_order
+    from engine.detection.surfaces import surface_order
 
     keep = np.array([4, 0, 2, 3])  # best first: a plane at 0.9 m, the ceiling, a window at mid-height, the floor
     lo = np.zeros((5, 3), dtype=np.int64)
@@ -228,8 +231,8 @@ def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path):
     these ceilings at the beams; the model trained with 250 m2 buildings too finds them with either rule, so
     the rules' difference is tested on hand-made windows in the test above, not on this building.)"""
 
-    from engine.detection.detect import detect_space
     from engine.detection.model import load_model
+    from engine.detection.space import detect_space
     from engine.spaces.points import index_spaces, load_space
     from tiles.store import open_store
 
@@ -257,7 +260,7 @@ def test_a_models_box_regression_moves_its_classes_detections(buildings, trained
     import dataclasses
 
     from engine.detection import boxfit as bf
-    from engine.detection.detect import detect_space
+    from engine.detection.space import detect_space
     from engine.spaces.points import index_spaces, load_space
 
     _, stores = buildings
@@ -291,7 +294,7 @@ def test_a_models_rescorer_replaces_its_classes_scores(buildings, trained):
     import dataclasses
 
     from engine.detection import rescore as rs
-    from engine.detection.detect import detect_space
+    from engine.detection.space import detect_space
     from engine.spaces.points import index_spaces, load_space
 
     _, stores = buildings

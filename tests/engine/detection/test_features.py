@@ -6,18 +6,13 @@ import pytest
 
 from engine.detection import moments as mom
 from engine.detection.canonical import CanonicalFrame
-from engine.detection.features import (
-    COLOUR_TARGET,
-    FeatureLayout,
-    SpaceVolume,
-    global_features,
-    global_scores,
-    local_features,
-    normalise_colours,
-    tent_code,
-    window_features,
-)
+from engine.detection.colours import COLOUR_TARGET, normalise_colours
+from engine.detection.features import window_features
+from engine.detection.global_block import global_features, global_scores, tent_code
+from engine.detection.layout import FeatureLayout
+from engine.detection.local_block import local_features
 from engine.detection.sliding import axis_positions, non_maximum_suppression, score_windows
+from engine.detection.volume import SpaceVolume
 
 
 def _volume(xyz, rgb=None, extent=(2.0, 2.0, 2.0), voxel=0.1, yaw=0.0):
@@ -216,7 +211,7 @@ def test_global_scores_are_the_global_block_times_the_weights(shape):
 
 def test_boundary_code_is_the_metric_distance_to_the_nearer_end():
     """A window against an end of a long space is at distance 0 along that axis whatever the room's size."""
-    from engine.detection.features import BOUNDARY_TENTS, boundary_distance
+    from engine.detection.global_block import BOUNDARY_TENTS, boundary_distance
 
     ext = np.array([20.0, 4.0, 3.0])
     pos = np.array([0.0, 0.25, 0.5])
@@ -242,7 +237,7 @@ def _wall_with_board(rng, board_rgb=(0.95, 0.95, 0.93), wall_rgb=(0.8, 0.78, 0.7
 
 def test_context_block_sees_a_board_against_its_wall():
     """The board's window is brighter than the slabs beside it along the wall; a plain wall patch is not."""
-    from engine.detection.features import CONTEXT_MARGIN, CONTEXT_SIZE, context_margin, window_context
+    from engine.detection.context_block import CONTEXT_MARGIN, CONTEXT_SIZE, context_margin, window_context
 
     rng = np.random.default_rng(11)
     vol, _ = _wall_with_board(rng)
@@ -270,7 +265,7 @@ def test_context_block_sees_a_board_against_its_wall():
 
 
 def test_context_features_from_hand_made_sums():
-    from engine.detection.features import context_features
+    from engine.detection.context_block import context_features
 
     window = np.array([10.0, 5.0, 5.0, 5.0])  # 10 points of luminance 0.5
     slabs = np.zeros((6, 4))

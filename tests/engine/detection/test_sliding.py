@@ -6,8 +6,10 @@ import pytest
 
 import engine.detection.sliding as sliding
 from engine.detection.canonical import CanonicalFrame
-from engine.detection.features import FeatureLayout, SpaceVolume, window_features
+from engine.detection.features import window_features
+from engine.detection.layout import FeatureLayout
 from engine.detection.sliding import _slot_sums, score_windows, score_windows_many
+from engine.detection.volume import SpaceVolume
 
 
 def _room(rng, n=40000, extent=(3.0, 2.4, 2.2)):

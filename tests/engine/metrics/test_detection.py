@@ -6,15 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from engine.metrics.detection import (
-    PointEvaluation,
-    average_precision,
-    box_iou_3d,
-    evaluate_detections,
-    evaluate_detections_serial,
-    match_detections,
-    partition_for_matching,
-)
+from engine.metrics.boxes import box_iou_3d
+from engine.metrics.detection import evaluate_detections, evaluate_detections_serial
+from engine.metrics.matching import partition_for_matching
+from engine.metrics.points import PointEvaluation
+from engine.metrics.precision import average_precision, match_detections
 from tiles.classes import CLASS_CODES
 
 
