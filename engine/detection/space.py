@@ -72,7 +72,8 @@ class Detections:
 def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings,
                      index: PointIndex | None = None, classes: list[int] | None = None,
                      candidates: dict[int, tuple[np.ndarray, ...]] | None = None) -> Detections:
-    """Sliding windows, NMS and refinement in one prepared space (``candidates``: :func:`window_candidates`'s,
+    """Sliding windows, NMS and refinement in one prepared space (``candidates``:
+    :func:`engine.detection.candidates.window_candidates`'s,
     when already computed)."""
     grid = vol.grid
     candidates = window_candidates(vol, model, settings, classes) if candidates is None else candidates
