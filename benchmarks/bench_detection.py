@@ -77,8 +77,10 @@ def _knn_normals(xyz: np.ndarray, k: int = 16) -> np.ndarray:
 
 
 def _speed(store, model, client_2, quick: bool) -> dict[str, Any]:
-    from engine.detection.detect import DetectionSettings, detect, detect_space, space_frame
-    from engine.detection.features import SpaceVolume
+    from engine.detection.detect import detect
+    from engine.detection.settings import DetectionSettings
+    from engine.detection.space import detect_space, space_frame
+    from engine.detection.volume import SpaceVolume
     from engine.spaces.points import index_spaces, load_space
 
     refs = index_spaces(store, "gt_space")
@@ -132,8 +134,9 @@ def _store(seed: int, gen_kw: dict[str, Any], client) -> Any:
 
 def run(quick: bool = False) -> dict[str, Any]:
     from engine.detection.detect import detect
-    from engine.detection.features import ABLATIONS
-    from engine.metrics.detection import PointEvaluation, evaluate_points, format_ap_table
+    from engine.detection.layout import ABLATIONS
+    from engine.metrics.detection import format_ap_table
+    from engine.metrics.points import PointEvaluation, evaluate_points
     from engine.outputs.labels import label_points
     from engine.training.ablation import detect_many
     from engine.training.settings import TrainSettings

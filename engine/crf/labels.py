@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from engine.detection.proposals import Proposal
-from engine.metrics.detection import boxes_array, match_detections
+from engine.metrics.boxes import boxes_array
+from engine.metrics.precision import match_detections
 from tiles.tasks import run_tasks
 
 

@@ -18,7 +18,7 @@ from engine.crf.labels import proposal_labels
 from engine.crf.model import N_CLASSES, CRFSettings, CRFWeights
 from engine.detection.proposals import Proposal
 from engine.detection.rescore import building_folds
-from engine.metrics.detection import average_precision
+from engine.metrics.precision import average_precision
 from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
 

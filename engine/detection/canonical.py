@@ -1,33 +1,11 @@
 """The canonical reference frame of a space (paper section 3.2) and its exact inverse.
 
-For every space, from its own points only (the same at training and at run time):
-
-1. **z is gravity** (the stores' z axis is up).
-2. **Manhattan orientation.**  The points are binned in 0.25 m voxels; the
-   normal of every planar vertical voxel patch (from voxel moments, see
-   :mod:`engine.detection.moments`) votes with its point count for an angle modulo 90
-   degrees (circular mean of ``4 * angle``).  Without such patches the
-   principal axis of the points in plan is used.  The angle is then sharpened
-   (:func:`refine_yaw`) to the one whose 1 cm projection histograms of the
-   walls' height band are sharpest: thin boxes need a yaw right to 0.05 degree.
-3. **Entrance wall.**  Among the four walls of the aligned box, the entrance is
-   the one with the widest *door-like opening*: a run of along-wall bins,
-   0.55 to 3.5 m wide, whose slab of points next to the wall face is empty from
-   0.25 m above the floor up to 1.8 m (or 70 % of the height), while the face
-   elsewhere has points (a real divider).  **Fallbacks** when no wall has
-   one (closed doors, open plans): when the ``meta/spaces`` document gives the
-   connection areas with neighbouring spaces, the wall nearest the largest one
-   (the longest shared face); else the longest wall, and between equally long
-   walls (within 5 cm) the one holding more points.
-   ``x`` then runs along the entrance wall, ``y`` points from it into the
-   space, and ``(x, y, z)`` is right-handed.
-4. **Unit cube.**  The aligned points are scaled to ``[0, 1]^3`` by the robust
-   box of their coordinates (0.05 % and 99.95 % quantiles, so that a few stray
-   points do not shrink the space).
-
-A :class:`CanonicalFrame` keeps yaw, origin (the world position of the unit
-cube's corner ``(0, 0, 0)``) and extent, so that every detection maps back to
-world coordinates exactly (:meth:`CanonicalFrame.unit_box_to_world`).
+From a space's own points only (the same at training and at run time): z is gravity; the Manhattan
+orientation from the normals of planar vertical voxel patches, sharpened by :func:`refine_yaw`; ``x`` along
+the entrance wall (the widest door-like opening, else the longest shared face with a neighbour, else the
+longest wall), ``y`` into the space; the unit cube from the robust box of the aligned points.
+A :class:`CanonicalFrame` keeps yaw, origin and extent, so that every detection maps back to world
+coordinates exactly (:meth:`CanonicalFrame.unit_box_to_world`).  Design notes: ``docs/design/detection.md``.
 """
 from __future__ import annotations
 

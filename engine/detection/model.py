@@ -1,44 +1,11 @@
 """The detection model file: documented arrays in ``<stem>.npz`` plus ``<stem>.json``, never pickle.
 
-``<stem>.npz`` (read with ``np.load(allow_pickle=False)``)::
-
-    weights           float64 (12, D)     linear SVM weights per element class (rows in tiles.classes order),
-                                          D = layout size; zero on disabled feature groups
-    bias              float64 (12,)       SVM intercept per class
-    trained           bool    (12,)       whether the class had training examples (else never detected)
-    atom_class        int16   (A,)        class code of each dictionary window
-    atom_unit_size    float64 (A, 3)      mean size in the unit cube (canonical x, y, z)
-    atom_metric_size  float64 (A, 3)      mean size in metres
-    atom_relative     bool    (A, 3)      per axis: the size follows the space (unit cube) rather than metres
-    atom_occupancy    bool    (A, K, K, K) occupancy pattern B (cell-wise mode of the cluster)
-    atom_members      int64   (A,)        training instances in the window's cluster
-    atom_weights      float64 (A, D)      optional (version 2): each window's own part of its class's SVM; a
-                                          window of atom a scores with weights[class] + atom_weights[a]
-    atom_bias         float64 (A,)        optional (version 2): each window's own part of the intercept
-    boxfit_coef       float64 (12, 3, 2, F+1) optional (version 3): per class, axis role and face, the learned box
-                                          regression's weights on the F point features then its intercept
-                                          (engine.detection.boxfit)
-    boxfit_enabled    bool    (12,)       optional (version 3): the class's detections are moved by it
-    rescore_mean      float64 (12, F)     optional (version 4): per class, the re-ranking's feature means
-    rescore_scale     float64 (12, F)     optional (version 4): ... and standard deviations (engine.detection.rescore)
-    rescore_coef      float64 (12, F)     optional (version 4): per class, the logistic re-ranking's weights on the
-                                          standardised features
-    rescore_bias      float64 (12,)       optional (version 4): ... and its intercept
-    rescore_enabled   bool    (12,)       optional (version 4): the class's detections take the re-ranked score
-    crf_*             any                 the CRF's arrays (engine.crf.model.CRFWeights.to_arrays), stored as given
-
-``<stem>.json``::
-
-    {"format": "buildingparser-detector", "version": 1 (2 with atom_weights, 3 with boxfit_*, 4 with rescore_*),
-     "classes": [...12 names...],
-     "layout": FeatureLayout.to_json(), "voxel": metres, "max_cells": int, "stride": fraction,
-     "detection": {...the detection settings the model was trained with...},
-     "dictionary": WindowDictionary.params(), "svm": {...}, "provenance": {...}, "cv": {...} | null,
-     "crf": {...the CRF's JSON parameters...} | null, "boxfit": {...its validation report...} | null,
-     "rescore": {...the re-ranking's validation report...} | null, "arrays": {name: description}}
-
-The CRF engineer's slot: :attr:`Model.crf` (JSON) and :attr:`Model.crf_arrays`
-(arrays whose names start with ``crf_``) are written and read back unchanged.
+The npz holds the linear SVMs (``weights``, ``bias``, ``trained``), the window dictionary (``atom_*``), and
+optionally each window's own part of its class's SVM (version 2), the learned box regression (``boxfit_*``,
+version 3), the learned re-ranking (``rescore_*``, version 4) and the CRF's arrays (``crf_*``); the JSON the
+layout, grid, settings, dictionary parameters, provenance and the arrays' descriptions.  The CRF engineer's
+slot: :attr:`Model.crf` (JSON) and :attr:`Model.crf_arrays` are written and read back unchanged.
+The arrays, their shapes and the JSON keys: ``docs/design/detection.md`` (the model file).
 """
 from __future__ import annotations
 
@@ -51,7 +18,7 @@ import numpy as np
 
 from engine.detection.boxfit import BoxFit
 from engine.detection.dictionary import WindowDictionary
-from engine.detection.features import FeatureLayout
+from engine.detection.layout import FeatureLayout
 from engine.detection.rescore import Rescorer
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError

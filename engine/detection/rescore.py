@@ -34,7 +34,7 @@ from sklearn.linear_model import LogisticRegression
 
 from engine.detection.boxfit import N_FEATURES as BOX_FEATURES
 from engine.detection.boxfit import box_features
-from engine.metrics.detection import average_precision
+from engine.metrics.precision import average_precision
 from tiles.classes import ELEMENT_CLASSES
 
 N_CLASSES = len(ELEMENT_CLASSES)

@@ -1,32 +1,11 @@
 """Depth of detections that sit in a wall: doors as deep as their points, not as a voxel.
 
-A door's ground truth spans its frame from the wall's middle to the casing
-proud of the face (11-24 cm), a board's from its face to the wall behind it
-(10 cm): about one voxel of the detector's 0.1 m grid, so a window placed one
-voxel off along the wall's normal overlaps it by nothing, and one placed right
-by at most the voxel's share of the depth.  After NMS, along each horizontal
-axis where such a detection is at most ``reveal-thin-voxels`` voxels deep, its extent
-becomes the span of the points in the box grown by ``reveal-grow`` metres on
-both sides along that axis, without its bottom and top voxel layers (the floor
-in front of a door, a ceiling), from the ``reveal-quantile`` to the ``1 -
-reveal-quantile`` quantile of their coordinates (a few stray points do not
-widen it): the
-jambs behind the wall face, the casing and the leaf of a door; the board and
-nothing behind it.  The box never shrinks below half its voxel depth, and its
-position along the wall, its height and its score are unchanged.
-
-Solid elements (``solid-classes``: columns, bookcases) get their horizontal extent the same
-way along both horizontal axes, but a side moves only where the points stop
-inside the grown box (a face); where they run on to within ``solid-edge`` of its
-edge, a surface continues there (the wall a pilaster stands against) and the
-window's side stays.  A 10 cm grid places a 25-35 cm column's sides to a voxel:
-on held-out generated buildings, column AP 13.6 -> 26.1 and 13.9 -> 25.5; bookcase
-AP 53.3 -> 57.8 on one pair of buildings, unchanged on two others.
-
-Settings: ``buildingparser.detection.reveal-*`` and ``solid-*`` (``engine/detection/detection.yaml``).  On for doors
-only: on held-out generated buildings it raised door AP from 0.7 to 6.1 and did
-not help boards (0.1 to 0) or windows (62.6 to 59.2; a window's sill board and
-frame are not its reveal's depth).
+After NMS, along each horizontal axis where such a detection is at most ``reveal-thin-voxels`` voxels deep,
+its extent becomes the span (``reveal-quantile`` quantiles) of the points in the box grown by ``reveal-grow``
+metres along that axis, without its bottom and top voxel layers.  Solid elements (``solid-classes``: columns,
+bookcases) get their horizontal sides the same way, but a side moves only where the points stop inside the
+grown box (a face).  Settings: ``buildingparser.detection.reveal-*`` and ``solid-*``
+(``engine/detection/detection.yaml``).  Why, and what it measured: ``docs/design/detection.md``.
 """
 from __future__ import annotations
 
@@ -98,7 +77,7 @@ def refine_reveals(lo: np.ndarray, hi: np.ndarray, lo_m: np.ndarray, hi_m: np.nd
     class_code
         ``(n,)`` their classes.
     grid, index
-        The space's :class:`engine.detection.moments.VoxelGrid` and :class:`engine.detection.detect.PointIndex`.
+        The space's :class:`engine.detection.moments.VoxelGrid` and :class:`engine.detection.pointindex.PointIndex`.
     settings
         Default: :meth:`RevealSettings.from_config`.
     """

@@ -1,36 +1,14 @@
 """Sliding windows over a space's unit cube (paper section 4, "Semantic Element Proposal Generation").
 
-Every window of the dictionary is slid over the space's voxel grid: along each
-axis from the ``0`` face to the ``1`` face with a stride of ``stride`` times the
-window's size (at least one voxel, at most ``max-stride`` metres: a quarter of a
-1.6 m window would misplace it by up to 20 cm), always including the position flush with
-the far face, so windows anchored at either face of the unit cube exist and a
-window as long as the space has exactly one position along that axis (walls,
-floor, ceiling).  The linear SVM score ``w . Phi + b`` of all positions of one
-window shape is computed at once (:func:`score_windows`):
-
-* a window's sub-boxes are products of per-axis voxel intervals; the distinct
-  intervals of all positions along each axis are collected, the point counts of
-  all their products come from the integral volume of counts in separable
-  look-ups (:func:`engine.detection.moments.box_sums_grid`), and the occupied ones (about
-  one in ten in a room) get their moment sums by the same eight-corner look-ups
-  as :func:`engine.detection.features.window_features` (so that the scores equal the
-  training features' to the last digits: sums taken in another order differ by
-  rounding that a nearly degenerate covariance magnifies to 0.03 in a score) and
-  their local features, once (shared by the overlapping windows);
-* each occupied sub-box then adds ``w_slot . features`` to every window that
-  holds it, in every slot it fills there (:func:`_slot_sums`: a sparse scatter,
-  about a tenth of the terms of all windows times all slots); the ratio
-  feature is linear in the sub-box count, divided by the window's count at the
-  end; the global features are computed per position that holds enough points;
-* the context block (layouts with ``context``) comes per position from the box
-  sums of the window and of its six slabs, seven separable look-ups
-  (:func:`_context_scores`);
-* :func:`score_windows_many` does this for several linear models of one window
-  shape at once (the features are computed once).
-
-:func:`non_maximum_suppression` keeps, per class, the best windows that overlap
-a better one by at most ``nms_iou`` (3D IoU in the canonical frame).
+Every window of the dictionary is slid over the space's voxel grid from the ``0`` face to the ``1`` face
+with a stride of ``stride`` times its size (at least one voxel, at most ``max-stride`` metres), always
+including the position flush with the far face.  :func:`score_windows` computes the linear SVM score of
+all positions of one window shape at once, from the distinct sub-boxes of all positions (their features
+computed once, the same sums as :func:`engine.detection.features.window_features`), scattered into the
+windows that hold them (:func:`_slot_sums`), plus the global and context blocks per position;
+:func:`score_windows_many` does it for several linear models of one shape.  :func:`non_maximum_suppression`
+keeps, per class, the best windows that overlap a better one by at most ``nms_iou``.
+Design notes: ``docs/design/detection.md``.
 """
 from __future__ import annotations
 
@@ -39,17 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.detection import moments as mom
-from engine.detection.features import (
-    LOCAL_SIZE,
-    FeatureLayout,
-    SpaceVolume,
-    context_features,
-    context_margin,
-    global_scores,
-    local_features,
-    slab_interval,
-    sub_bounds,
-)
+from engine.detection.context_block import context_features, context_margin, slab_interval
+from engine.detection.global_block import global_scores
+from engine.detection.layout import FeatureLayout
+from engine.detection.local_block import LOCAL_SIZE, local_features, sub_bounds
+from engine.detection.volume import SpaceVolume
 
 #: Sub-boxes whose moments are computed in one go (bounds the memory of a batch).
 SUBBOX_BATCH = 250_000

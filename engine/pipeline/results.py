@@ -97,7 +97,8 @@ def compute_metrics(store: TileStore, input: str, parsed, final, proposals, elem
     gt = (store.doc(GT_DOC) or {}).get("elements")
     if gt and "gt_class" in store.meta.names():
         from engine.crf.apply import MARGIN, rescored
-        from engine.metrics.detection import evaluate_detections, evaluate_points
+        from engine.metrics.detection import evaluate_detections
+        from engine.metrics.points import evaluate_points
 
         after = evaluate_detections(elements, gt, client=client)
         before = evaluate_detections(proposals, gt, client=client)

@@ -177,7 +177,8 @@ def _spaces_stage(ctx: RunContext, fp_ingest: str):
 
 def _detection_stage(ctx: RunContext, model, parsed, fp_spaces: str) -> tuple[list, str]:
     """Detection (paper 3.2, 4); returns the proposals and the stage's fingerprint."""
-    from engine.detection.detect import DetectionSettings, detect
+    from engine.detection.detect import detect
+    from engine.detection.settings import DetectionSettings
 
     store = ctx.store
     fp = fingerprint("detection", DetectionSettings.from_config().to_json(), fp_spaces,

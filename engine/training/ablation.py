@@ -8,7 +8,7 @@ frame, the moments and, per window shape, the features of every sliding
 position.  Here each space is prepared once and every window shape is scored
 for all models' weights at once (:func:`engine.detection.sliding.score_windows_many`);
 NMS, local search and refinement then run per model
-(:func:`engine.detection.detect.detect_in_volume` with the precomputed candidates).
+(:func:`engine.detection.space.detect_in_volume` with the precomputed candidates).
 The proposals are those of :func:`engine.detection.detect.detect` with each model, to
 rounding of the scores (tested).
 """
@@ -18,18 +18,13 @@ import dataclasses
 
 import numpy as np
 
-from engine.detection.detect import (
-    DetectionSettings,
-    detect_in_volume,
-    prepare_indexed,
-    space_frame,
-    to_proposals,
-    top_windows,
-)
-from engine.detection.features import SpaceVolume
+from engine.detection.candidates import top_windows
 from engine.detection.model import Model
 from engine.detection.proposals import Proposal
+from engine.detection.settings import DetectionSettings
 from engine.detection.sliding import score_windows_many, window_shape
+from engine.detection.space import detect_in_volume, prepare_indexed, space_frame, to_proposals
+from engine.detection.volume import SpaceVolume
 from engine.spaces.points import SpacePoints, SpaceRef, index_spaces, load_space
 from tiles.tasks import run_tasks
 
@@ -52,7 +47,7 @@ def check_compatible(models: list[Model]) -> None:
 
 def window_candidates_many(vol: SpaceVolume, models: list[Model],
                            settings: DetectionSettings) -> list[dict[int, tuple[np.ndarray, ...]]]:
-    """:func:`engine.detection.detect.window_candidates` of every model, each window shape scored once for all."""
+    """:func:`engine.detection.candidates.window_candidates` of every model, each window shape scored once for all."""
     m0 = models[0]
     grid = vol.grid
     # weights zero on each model's disabled groups: one layout without any disabled group scores them all
@@ -79,7 +74,7 @@ def window_candidates_many(vol: SpaceVolume, models: list[Model],
 
 def detect_space_many(points: SpacePoints, models: list[Model], settings: DetectionSettings,
                       origin: np.ndarray | None = None) -> list[list[Proposal]]:
-    """Per model, the proposals of one space (as :func:`engine.detection.detect.detect_space` gives them)."""
+    """Per model, the proposals of one space (as :func:`engine.detection.space.detect_space` gives them)."""
     if len(points.xyz) < max(settings.min_window_points, 4):
         return [[] for _ in models]
     vol, index = prepare_indexed(points, models[0], space_frame(points), settings.refine)

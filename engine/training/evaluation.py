@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from engine.detection.detect import DetectionSettings, detect
+from engine.detection.detect import detect
 from engine.detection.model import Model
+from engine.detection.settings import DetectionSettings
 from engine.metrics.detection import evaluate_detections
 from engine.training.settings import TrainSettings
 from engine.training.train import train

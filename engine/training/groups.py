@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.detection.features import ABLATIONS
+from engine.detection.layout import ABLATIONS
 from engine.detection.model import Model
 from engine.metrics.detection import evaluate_detections_serial
 from engine.spaces.points import load_space

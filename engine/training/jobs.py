@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from engine.detection import moments as mom
-from engine.detection.detect import space_frame
-from engine.detection.features import SpaceVolume
+from engine.detection.space import space_frame
+from engine.detection.volume import SpaceVolume
 from engine.spaces.points import SpaceRef, index_spaces, load_space
 from engine.training.settings import N_CLASSES, TrainSettings
 from tiles.errors import UserError

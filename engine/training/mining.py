@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from engine.detection.detect import DetectionSettings
 from engine.detection.model import Model
+from engine.detection.settings import DetectionSettings
 from engine.training.jobs import TrainJob
 from engine.training.samples import Samples, samples_task
 from engine.training.settings import N_CLASSES, TrainSettings

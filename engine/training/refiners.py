@@ -15,11 +15,12 @@ import numpy as np
 
 from engine.detection.boxfit import box_features, face_targets, fit_boxfit
 from engine.detection.canonical import CanonicalFrame
-from engine.detection.detect import DetectionSettings, detect_in_volume, prepare_indexed, space_frame
 from engine.detection.model import Model
 from engine.detection.rescore import fit_rescorer, rescore_features
+from engine.detection.settings import DetectionSettings
 from engine.detection.sliding import box_iou
-from engine.metrics.detection import match_detections
+from engine.detection.space import detect_in_volume, prepare_indexed, space_frame
+from engine.metrics.precision import match_detections
 from engine.spaces.points import load_space
 from engine.training.jobs import TrainJob, canonical_gt
 from engine.training.settings import N_CLASSES, TrainSettings

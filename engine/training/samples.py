@@ -15,10 +15,12 @@ import numpy as np
 
 from engine.detection import moments as mom
 from engine.detection.canonical import CanonicalFrame
-from engine.detection.detect import DetectionSettings, prepare_space
-from engine.detection.features import SpaceVolume, window_features
+from engine.detection.features import window_features
 from engine.detection.model import Model
+from engine.detection.settings import DetectionSettings
 from engine.detection.sliding import grid_iou, score_windows, window_positions, window_shape
+from engine.detection.space import prepare_space
+from engine.detection.volume import SpaceVolume
 from engine.spaces.points import load_space
 from engine.training.jobs import MIN_INSTANCE_POINTS, TrainJob, canonical_gt
 from engine.training.settings import N_CLASSES, TrainSettings

@@ -10,7 +10,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from engine import config
-from engine.detection.features import ABLATIONS
+from engine.detection.layout import ABLATIONS
 from tiles.classes import ELEMENT_CLASSES, element_class_list
 
 #: The element classes a detector is trained for.

@@ -106,7 +106,7 @@ def refit_without(model: Model, samples: dict[int, Samples], disabled: tuple[str
     model, samples
         A model and its samples, as :func:`engine.training.train.train_with_samples` returns them.
     disabled
-        Feature groups to leave out (:data:`engine.detection.features.ABLATIONS` values), added to the
+        Feature groups to leave out (:data:`engine.detection.layout.ABLATIONS` values), added to the
         model's own disabled groups.
     settings
         The SVM's ``c`` and ``seed`` (default: the model's training settings).

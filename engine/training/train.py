@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from engine.detection.detect import DetectionSettings
 from engine.detection.dictionary import WindowDictionary
-from engine.detection.features import FeatureLayout
+from engine.detection.layout import FeatureLayout
 from engine.detection.model import Model
+from engine.detection.settings import DetectionSettings
 from engine.training import groups
 from engine.training.jobs import TrainJob, instances_task, training_jobs
 from engine.training.mining import mine_and_fit

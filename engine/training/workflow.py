@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from engine import config
-from engine.detection.features import ABLATIONS
+from engine.detection.layout import ABLATIONS
 from engine.detection.model import Model
 from engine.training.evaluation import cross_validate
 from engine.training.settings import TrainSettings

@@ -15,8 +15,8 @@ import engine.config
 import engine.pipeline.cluster as cluster
 from engine.cli import main
 from engine.crf.model import CRFSettings
-from engine.detection.detect import DetectionSettings
 from engine.detection.reveal import RevealSettings
+from engine.detection.settings import DetectionSettings
 from engine.spaces.parse import SpaceSettings
 from engine.training.settings import TrainSettings
 from tiles.config import SCHEMA, SCHEMA_DEFAULTS, setting, validate_settings

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.detection.dictionary import WindowDictionary
-from engine.detection.features import FeatureLayout
+from engine.detection.layout import FeatureLayout
 from engine.detection.model import Model, load_model
 from tiles.errors import UserError
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from engine.detection import rescore as rs
-from engine.metrics.detection import average_precision
+from engine.metrics.precision import average_precision
 
 
 def test_space_features_read_the_nearer_end_wherever_the_box_stands():

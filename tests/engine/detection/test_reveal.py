@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from engine.detection import moments as mom
-from engine.detection.detect import PointIndex, space_frame
+from engine.detection.pointindex import PointIndex
 from engine.detection.reveal import RevealSettings, point_span, refine_reveals
 from engine.detection.sliding import box_iou
+from engine.detection.space import space_frame
 from engine.spaces.points import index_spaces, load_space
 from engine.synth import generate
 from tiles.classes import ELEMENT_CLASSES

@@ -6,8 +6,10 @@ import pytest
 
 import engine.detection.sliding as sliding
 from engine.detection.canonical import CanonicalFrame
-from engine.detection.features import FeatureLayout, SpaceVolume, window_features
-from engine.detection.sliding import _slot_sums, score_windows, score_windows_many
+from engine.detection.features import window_features
+from engine.detection.layout import FeatureLayout
+from engine.detection.sliding import _slot_sums, axis_positions, non_maximum_suppression, score_windows, score_windows_many
+from engine.detection.volume import SpaceVolume
 
 
 def _room(rng, n=40000, extent=(3.0, 2.4, 2.2)):
@@ -100,3 +102,18 @@ def test_many_models_share_the_features_and_score_each_as_alone(monkeypatch):
         assert np.allclose(many[j].scores[ok], one.scores[ok], rtol=0, atol=1e-12)
         assert np.array_equal(many[j].counts, one.counts) and np.array_equal(many[j].px, one.px)
     assert not np.allclose(many[0].scores[ok], many[1].scores[ok])
+
+
+def test_positions_reach_both_faces():
+    p = axis_positions(23, 5, 0.25)
+    assert p[0] == 0 and p[-1] == 18 and np.all(np.diff(p) >= 1)
+    assert axis_positions(10, 10, 0.25).tolist() == [0]
+    assert axis_positions(10, 12, 0.25).tolist() == [0]
+
+
+def test_nms_keeps_best_of_overlapping_boxes():
+    lo = np.array([[0, 0, 0], [1, 0, 0], [10, 0, 0], [0, 0, 0]])
+    hi = lo + [10, 2, 2]
+    hi[3] = [2, 2, 2]
+    keep = non_maximum_suppression(lo, hi, np.array([0.5, 0.9, 0.7, 0.1]), 0.3, 10)
+    assert keep.tolist() == [1, 2, 3]

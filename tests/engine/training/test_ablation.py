@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.detection.detect import detect
-from engine.detection.features import ABLATIONS
+from engine.detection.layout import ABLATIONS
 from engine.training.ablation import check_compatible, detect_many
 from engine.training.settings import TrainSettings
 from engine.training.svm import refit_without

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.detection.features import ABLATIONS, FeatureLayout
+from engine.detection.layout import ABLATIONS, FeatureLayout
 from engine.training import groups
 from engine.training.settings import TrainSettings
 from engine.training.svm import refit_without

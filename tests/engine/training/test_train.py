@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.detection.features import ABLATIONS, FeatureLayout
+from engine.detection.layout import ABLATIONS, FeatureLayout
 from engine.synth import generate
 from engine.training.settings import TrainSettings
 from engine.training.svm import refit_without
@@ -81,7 +81,7 @@ def test_hardest_mining_takes_the_highest_scoring_fresh_violators(trained):
     """``mining: hardest``: a space's hard negatives are its top-scoring violators, none mined before."""
     import dataclasses
 
-    from engine.detection.detect import DetectionSettings
+    from engine.detection.settings import DetectionSettings
     from engine.training.jobs import instances_task, training_jobs
     from engine.training.samples import samples_task
 
@@ -119,8 +119,9 @@ def test_training_with_windows_own_weights_scores_with_them(trained):
     """``atom-weights``: the model holds each window's part, refits reproduce it, detection uses it."""
     import dataclasses
 
-    from engine.detection.detect import DetectionSettings, detect_space, prepare_space, space_frame
+    from engine.detection.settings import DetectionSettings
     from engine.detection.sliding import score_windows, window_shape
+    from engine.detection.space import detect_space, prepare_space, space_frame
     from engine.spaces.points import index_spaces, load_space
 
     store, settings, _, _ = trained

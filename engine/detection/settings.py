@@ -1,0 +1,64 @@
+"""Run-time settings of the detector (:class:`DetectionSettings`, ``buildingparser.detection.*``).
+
+Defaults, with the reason for each value: ``engine/detection/detection.yaml``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+from engine import config
+from tiles.classes import element_class_list
+
+#: How a space's one ceiling and floor are chosen among their windows (:func:`engine.detection.surfaces.surface_order`).
+SURFACE_CHOICES = ("extreme", "halves", "score")
+
+
+@dataclass
+class DetectionSettings:
+    """Run-time settings of the detector (see ``engine/detection/detection.yaml``)."""
+
+    stride: float = 0.25
+    max_stride: float = 0.2
+    min_window_points: int = 10
+    score_threshold: float = -0.75
+    pre_nms: int = 300
+    nms_iou: float = 0.3
+    nms_min_size: float = 0.3
+    max_per_class: int = 30
+    one_per_space: tuple[str, ...] = ("ceiling", "floor")
+    surface_choice: str = "extreme"
+    local_search: bool = True
+    refine: bool = True
+    refine_classes: tuple[str, ...] = ("ceiling", "floor", "wall")
+    thin_voxels: int = 2
+    refine_bin: float = 0.005
+    label_margin: float = 0.02
+    box_fit: bool = True
+    rescore: bool = True
+
+    def __post_init__(self) -> None:
+        if not 0 < self.stride <= 1:
+            raise ValueError(f"stride must be in (0, 1], got {self.stride}")
+        if self.max_stride <= 0:
+            raise ValueError(f"max-stride must be positive, got {self.max_stride}")
+        if not 0 <= self.nms_iou <= 1:
+            raise ValueError(f"nms-iou must be in [0, 1], got {self.nms_iou}")
+        if self.max_per_class < 1 or self.pre_nms < 1:
+            raise ValueError("max-per-class and pre-nms must be >= 1")
+        if self.surface_choice not in SURFACE_CHOICES:
+            raise ValueError(f"surface-choice must be one of {', '.join(SURFACE_CHOICES)}, got {self.surface_choice!r}")
+        if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
+            raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
+        for name in ("one_per_space", "refine_classes"):
+            setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
+
+    @classmethod
+    def from_config(cls, **overrides: Any) -> DetectionSettings:
+        """Settings from ``buildingparser.detection.*``, with keyword overrides."""
+        kw = config.settings_fields(cls, "detection")
+        kw.update(overrides)
+        return cls(**kw)
+
+    def to_json(self) -> dict[str, Any]:
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v) for f in fields(self)}

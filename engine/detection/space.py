@@ -1,0 +1,124 @@
+"""Element detection in one space: its frame and integral volume, its windows, their refinement, its proposals.
+
+:func:`detect_space` runs the steps of the paper's section 4 on one space's points: the canonical frame
+(:func:`space_frame`), the integral volume and voxel-sorted point index (:func:`prepare_indexed`), the windows
+of every class (:mod:`engine.detection.candidates`), the thin-box refinement of surfaces
+(:mod:`engine.detection.surfaces`), doors' depth and columns' sides (:mod:`engine.detection.reveal`), the
+model's box regression and re-ranking, and the proposals in world coordinates (:func:`to_proposals`).
+Design notes: ``docs/design/detection.md``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.detection import moments as mom
+from engine.detection.candidates import class_windows, window_candidates
+from engine.detection.canonical import CanonicalFrame, estimate_frame
+from engine.detection.model import Model
+from engine.detection.pointindex import PointIndex
+from engine.detection.proposals import Proposal
+from engine.detection.reveal import refine_reveals
+from engine.detection.settings import DetectionSettings
+from engine.detection.surfaces import refine_surfaces
+from engine.detection.volume import SpaceVolume
+from engine.spaces.points import SpacePoints
+from tiles.classes import ELEMENT_CLASSES
+
+
+def space_frame(points: SpacePoints, connection: np.ndarray | None = None) -> CanonicalFrame:
+    """The canonical frame of a space (store-local coordinates), the same at training and run time."""
+    return estimate_frame(points.xyz, connection=connection)
+
+
+def prepare_space(points: SpacePoints, model: Model, frame: CanonicalFrame | None = None) -> SpaceVolume:
+    """Frame and integral volume of one space for a model's voxel size."""
+    frame = frame if frame is not None else space_frame(points)
+    return SpaceVolume.build(points.xyz, points.rgb, frame, model.voxel, model.max_cells, model.layout.colour)
+
+
+def prepare_indexed(points: SpacePoints, model: Model, frame: CanonicalFrame,
+                    with_index: bool = True) -> tuple[SpaceVolume, PointIndex | None]:
+    """A space's integral volume and (``with_index``) its voxel-sorted point index, from one pass of
+    preparation: canonical points and their voxels, shared by the moments and the index."""
+    metric = frame.to_metric(points.xyz)
+    grid = mom.VoxelGrid.covering(frame.extent, model.voxel, model.max_cells)
+    flat = grid.flat_index(metric)
+    vol = SpaceVolume.from_metric(metric, points.rgb, frame, grid, model.layout.colour, flat)
+    return vol, (PointIndex(metric, grid, flat) if with_index else None)
+
+
+@dataclass
+class Detections:
+    """Detections of one space in its voxel grid, before conversion to proposals."""
+
+    lo: np.ndarray  # (n, 3) voxel box
+    hi: np.ndarray
+    lo_m: np.ndarray  # (n, 3) refined box, canonical metres
+    hi_m: np.ndarray
+    score: np.ndarray
+    class_code: np.ndarray
+    atom: np.ndarray
+
+    @classmethod
+    def empty(cls) -> Detections:
+        """No detections."""
+        z3 = np.zeros((0, 3), dtype=np.int64)
+        return cls(z3, z3, z3.astype(float), z3.astype(float), np.zeros(0), np.zeros(0, np.int64),
+                   np.zeros(0, np.int64))
+
+
+def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings,
+                     index: PointIndex | None = None, classes: list[int] | None = None,
+                     candidates: dict[int, tuple[np.ndarray, ...]] | None = None) -> Detections:
+    """Sliding windows, NMS and refinement in one prepared space (``candidates``:
+    :func:`engine.detection.candidates.window_candidates`'s,
+    when already computed)."""
+    grid = vol.grid
+    candidates = window_candidates(vol, model, settings, classes) if candidates is None else candidates
+    per_class = [found for c in (range(len(ELEMENT_CLASSES)) if classes is None else classes)
+                 if (found := class_windows(c, candidates, vol, model, settings)) is not None]
+    if not per_class:
+        return Detections.empty()
+    lo, hi, score, cls_all, at_all_cat = (np.concatenate(parts) for parts in zip(*per_class))
+    vox = grid.voxel
+    lo_m, hi_m = lo * vox, hi * vox
+    if settings.refine and index is not None:
+        refine_surfaces(lo, hi, lo_m, hi_m, cls_all, at_all_cat, model.dictionary.atoms_, grid, index, settings)
+        refine_reveals(lo, hi, lo_m, hi_m, cls_all, grid, index)  # doors' depth, columns' sides
+        if model.boxfit is not None and settings.box_fit:
+            model.boxfit.apply(lo_m, hi_m, cls_all, index.points_in_metric, np.asarray(vol.frame.extent, float))
+    if settings.refine and index is not None and model.rescorer is not None and settings.rescore:
+        score = model.rescorer.apply(score, cls_all, lo_m, hi_m, index.points_in_metric,
+                                     np.asarray(vol.frame.extent, float))
+    return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat)
+
+
+def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,
+                 origin: np.ndarray) -> list[Proposal]:
+    """Detections as :class:`Proposal` objects in world coordinates (``origin`` = store-local to world shift)."""
+    f = vol.frame
+    world = CanonicalFrame(f.yaw, f.origin + np.asarray(origin, dtype=np.float64), f.extent, f.entrance, f.info)
+    out = []
+    atoms = model.dictionary.atoms_
+    for i in range(len(det.score)):
+        p = det.lo_m[i] / f.extent
+        s = (det.hi_m[i] - det.lo_m[i]) / f.extent
+        center, size, yaw = world.unit_box_to_world(p, s)
+        out.append(Proposal(space_id=int(space_id), class_code=int(det.class_code[i]), score=float(det.score[i]),
+                            position=p, size=s, occupancy=atoms[int(det.atom[i])].occupancy.copy(),
+                            center=center, world_size=size, yaw=float(yaw),
+                            extra={"atom": int(det.atom[i])}))
+    return out
+
+
+def detect_space(points: SpacePoints, model: Model, settings: DetectionSettings | None = None,
+                 origin: np.ndarray | None = None, connection: np.ndarray | None = None) -> list[Proposal]:
+    """All proposals of one space (its points in store-local coordinates)."""
+    settings = settings or DetectionSettings.from_config()
+    if len(points.xyz) < max(settings.min_window_points, 4):
+        return []
+    vol, index = prepare_indexed(points, model, space_frame(points, connection), settings.refine)
+    det = detect_in_volume(vol, model, settings, index)
+    return to_proposals(det, vol, model, points.space_id, np.zeros(3) if origin is None else origin)

@@ -1,0 +1,19 @@
+"""The detector's settings: defaults from ``buildingparser.detection.*``, validation, class lists."""
+from __future__ import annotations
+
+import pytest
+
+from engine.detection.settings import DetectionSettings
+
+
+def test_one_per_space_and_refine_classes_settings():
+    assert DetectionSettings.from_config().one_per_space == ("ceiling", "floor")
+    assert DetectionSettings.from_config().refine_classes == ("ceiling", "floor", "wall")
+    with pytest.raises(ValueError, match="refine-classes"):
+        DetectionSettings(refine_classes="walls")
+    assert DetectionSettings(one_per_space="wall, floor").one_per_space == ("wall", "floor")
+    assert DetectionSettings(one_per_space=()).to_json()["one_per_space"] == []
+    with pytest.raises(ValueError, match="one-per-space"):
+        DetectionSettings(one_per_space=("stairs",))
+    with pytest.raises(ValueError, match="surface-choice"):
+        DetectionSettings(surface_choice="highest")

@@ -1,0 +1,111 @@
+"""Detection in one space: the one ceiling under beams, and the model's box regression and re-ranking applied."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.detection.settings import DetectionSettings
+from engine.synth import generate
+from tiles.classes import CLASS_CODES
+
+
+def test_ceilings_of_rooms_with_beams_are_found_at_the_ceiling(tmp_path):
+    """``surface-choice: extreme`` (the default): each space's ceiling is at its ground-truth height (within 5 cm),
+    not at the beams' undersides.
+
+    (With the shipped model of session 10, ``score`` -- the best window, searched beside it only -- put one of
+    these ceilings at the beams; the model trained with 250 m2 buildings too finds them with either rule, so
+    the rules' difference is tested on hand-made windows in the test above, not on this building.)"""
+
+    from engine.detection.model import load_model
+    from engine.detection.space import detect_space
+    from engine.spaces.points import index_spaces, load_space
+    from tiles.store import open_store
+
+    generate(str(tmp_path / "b.zarr"), seed=43, rooms=3, density=800, yaw=20.0)
+    store = open_store(str(tmp_path / "b.zarr"))
+    gt = store.doc("ground_truth")["elements"]
+    assert sum(e["class"] == "beam" for e in gt) >= 3  # the building this test needs
+    origin = np.asarray(store.meta.origin)
+    settings = DetectionSettings.from_config()
+    assert settings.surface_choice == "extreme"
+    model = load_model(None)
+    errors = []
+    for ref in index_spaces(store, "gt_space"):
+        want = [e for e in gt if int(e["space"]) == ref.space_id and e["class"] == "ceiling"]
+        props = detect_space(load_space(store, ref, "gt_space"), model, settings, origin)
+        got = [p for p in props if p.class_code == 0]  # ceiling
+        assert len(got) == 1 and len(want) == 1
+        errors.append(abs(got[0].center[2] - want[0]["center"][2]))
+    assert max(errors) < 0.05, errors
+
+
+def test_a_models_box_regression_moves_its_classes_detections(buildings, trained):
+    """Detection applies the model's learned box regression (engine.detection.boxfit) to the classes it is enabled for,
+    after the rules, and ``box-fit: false`` turns it off."""
+    import dataclasses
+
+    from engine.detection import boxfit as bf
+    from engine.detection.space import detect_space
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    coef = np.zeros((12, 3, 2, bf.N_FEATURES + 1))
+    coef[CLASS_CODES["wall"], 2, :, -1] = [0.1, -0.1]  # walls: bottom up and top down by a tenth of their height
+    enabled = np.zeros(12, bool)
+    enabled[CLASS_CODES["wall"]] = True
+    moved = dataclasses.replace(trained, boxfit=bf.BoxFit(coef, enabled))
+    plain = detect_space(pts, trained, DetectionSettings.from_config())
+    fitted = detect_space(pts, moved, DetectionSettings.from_config())
+    off = detect_space(pts, moved, DetectionSettings.from_config(box_fit=False))
+    assert [p.class_code for p in plain] == [p.class_code for p in fitted] and len(plain) > 3
+    walls = 0
+    for a, b, c in zip(plain, fitted, off):
+        np.testing.assert_allclose(c.world_size, a.world_size)
+        if a.class_name == "wall":
+            walls += 1
+            assert b.world_size[2] == pytest.approx(0.8 * a.world_size[2]) and b.center[2] == pytest.approx(a.center[2])
+        else:
+            np.testing.assert_allclose(b.world_size, a.world_size)
+    assert walls >= 2
+
+
+def test_a_models_rescorer_replaces_its_classes_scores(buildings, trained):
+    """Detection gives the classes the model's learned re-ranking (engine.detection.rescore) is enabled for its log-odds
+    as their score, from the features of their final boxes; other classes and ``rescore: false`` keep the
+    detector's score, and the boxes do not move."""
+    import dataclasses
+
+    from engine.detection import rescore as rs
+    from engine.detection.space import detect_space
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    wall = CLASS_CODES["wall"]
+    coef = np.zeros((12, rs.N_FEATURES))
+    coef[wall, 0] = -1.0  # walls: the detector's score turned around
+    coef[wall, rs.N_FEATURES - 3] = 0.5  # ... plus half the log of the space's height (the same for every wall)
+    enabled = np.zeros(12, bool)
+    enabled[wall] = True
+    rescored = dataclasses.replace(trained, rescorer=rs.Rescorer(np.zeros((12, rs.N_FEATURES)),
+                                                                 np.ones((12, rs.N_FEATURES)), coef, np.full(12, 2.0),
+                                                                 enabled))
+    plain = detect_space(pts, trained, DetectionSettings.from_config())
+    new = detect_space(pts, rescored, DetectionSettings.from_config())
+    off = detect_space(pts, rescored, DetectionSettings.from_config(rescore=False))
+    assert [p.class_code for p in plain] == [p.class_code for p in new] and len(plain) > 3
+    walls = [(a, b) for a, b in zip(plain, new) if a.class_code == wall]
+    assert len(walls) >= 2
+    shift = {round(b.score + a.score - 2.0, 9) for a, b in walls}
+    assert len(shift) == 1 and shift != {0.0}  # one space: the same height term for every wall
+    for a, b, c in zip(plain, new, off):
+        np.testing.assert_allclose(b.world_size, a.world_size)
+        assert c.score == a.score
+        if a.class_code != wall:
+            assert b.score == a.score
