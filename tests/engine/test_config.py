@@ -17,7 +17,7 @@ from engine.cli import main
 from engine.crf.model import CRFSettings
 from engine.detection.detect import DetectionSettings
 from engine.detection.reveal import RevealSettings
-from engine.spaces.parse import SpaceSettings
+from engine.spaces.settings import SpaceSettings
 from engine.training.settings import TrainSettings
 from tiles.config import SCHEMA, SCHEMA_DEFAULTS, setting, validate_settings
 from tiles.errors import SettingsError
