@@ -1,32 +1,8 @@
 """Slicing the building into an over-segmented set of cells with peak-gap-peak dividers (paper 3.1.1).
 
-Order of the axes (the paper leaves it open):
-
-1. **z first, over the whole building**: storeys are separated by the void
-   between a ceiling and the next floor (a slab is a divider).  One histogram.
-2. **Then alternately along the first and the second horizontal axis, per
-   storey, recursively**: dividers along ``u`` cut each storey into slices,
-   each slice is cut along ``v`` (the paper's two steps), and every resulting
-   box is searched again along ``u``, then ``v``... until a box has been
-   searched along both axes without a new divider (or ``max_levels``).  The
-   recursion finds walls that span only part of the building, whose void is
-   filled in a whole-storey histogram by the rooms beside them; the paper
-   only goes one level deep.
-
-The upper band of a storey (points more than ``upper_band`` metres above its
-floor, i.e. above the doors) gets its own histogram in the same bincount: the
-void test is made there, where a wall is solid and a room's ceiling continuous
-(see :func:`engine.spaces.dividers.detect_dividers`).
-
-Every divider is elongated across the box it was found in, so the boxes
-over-segment the spaces; :mod:`engine.spaces.merging` merges them back.
-
-Each level is ONE pass over the tiles (:func:`engine.spaces.histograms.segment_histograms`:
-all active boxes' histograms from one bincount per tile, summed) and one task
-per box for its divider search.  Besides peak-gap-peak dividers, runs of at
-least ``empty_run`` metres without any point cut a box too (nothing was
-scanned there: whatever lies on the two sides is not connected) and are left
-out of every box; that also trims the empty ends of a box.
+Storeys first (z, over the whole building), then recursively along ``u`` and ``v`` per storey, one pass over
+the tiles per level and one task per box searched; the void test is made in the upper band.
+:mod:`engine.spaces.merging` merges the cells back.  Why and how: ``docs/design/spaces.md`` (slicing).
 """
 from __future__ import annotations
 
