@@ -174,15 +174,7 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
     rp = dataclasses.replace(ridge_params, drift=pm, width=pm)
     need = p.step / z_bin
     sp = int(round(ridge_params.min_spacing / bin_width))
-    if test:
-        bz = np.asarray(points[2])
-        z_lo = floor_z + int(round(p.floor_band / z_bin))
-        top = int(np.max(ceiling.height))
-        band = (bz >= z_lo) & (bz < top)  # the vertical band of every line lies within this one
-        pu, pv, pz = np.asarray(points[0])[band], np.asarray(points[1])[band], bz[band]
-        tol = int(round(p.partition_tolerance / bin_width))
-        cb = c * px
-        ceil_band = int(round(p.ceiling_band / z_bin))
+    band = _partition_band(ceiling, p, bin_width, z_bin, c, points, floor_z) if test else None
     out: list[RidgeLine] = []
     for axis in (0, 1):
         h = ceiling.height if axis == 0 else ceiling.height.T
@@ -194,8 +186,8 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
             diff = np.abs(before - after)
             mask = ((cov_b >= p.min_scanned) & (cov_a >= p.min_scanned) & (diff >= need)
                     & (spread_b < need) & (spread_a < need))
-        if test:
-            normal, along = (pu, pv) if axis == 0 else (pv, pu)
+        if band is not None:
+            normal, along = (band.pu, band.pv) if axis == 0 else (band.pv, band.pu)
             lower = np.fmin(before, after)  # the lower ceiling's level at each step (z bins)
         for r in ridge_lines(mask, np.nan_to_num(diff), axis, 0, 0, 1, rp, pm):
             line = RidgeLine(axis, n0 + r.cut * px, tuple((a0 + a * c * px, a0 + b * c * px) for a, b in r.runs),
@@ -204,27 +196,63 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
             if any(q.axis == axis and abs(q.cut - line.cut) < sp
                    and any(q.covered(a, b) for a, b in line.runs) for q in ridges):
                 continue
-            if test:
-                # the line's position in each chunk: the mean of its steps there (its cut where it has none)
-                lo, hi = (r.lo if r.lo is not None else r.cut), (r.hi if r.hi is not None else r.cut)
-                m = mask[lo:hi + 1]
-                cnt = m.sum(axis=0)
-                pos = np.where(cnt > 0, (m * np.arange(lo, hi + 1)[:, None]).sum(axis=0) / np.maximum(cnt, 1), r.cut)
-                centre = n0 + pos * px
-                z_hi = float(np.median(lower[lo:hi + 1][m])) - ceil_band  # under the lower ceiling
-                if p.both_halves:  # points at all heights, not furniture only: in each half of the band
-                    mid = 0.5 * (z_lo + z_hi)
-                    low_half, high_half = pz < mid, (pz >= mid) & (pz < z_hi)
-                    held = (partition_support(normal[low_half], along[low_half], a0, cb, centre, tol)
-                            & partition_support(normal[high_half], along[high_half], a0, cb, centre, tol))
-                else:
-                    sel = pz < z_hi
-                    held = partition_support(normal[sel], along[sel], a0, cb, centre, tol)
-                # a run's end chunks are left out: the walls it meets stand there under a soffit's edge too
-                runs = tuple((a0 + a * cb, a0 + b * cb) for a, b in r.runs
-                             if b - a > 2 and held[a + 1:b - 1].mean() >= p.min_partition)
+            if band is not None:
+                runs = _held_runs(r, mask, lower, normal, along, band, n0, a0, px, p)
                 if not runs:
                     continue
                 line = dataclasses.replace(line, runs=runs)
             out.append(line)
     return out
+
+
+@dataclass
+class _PartitionBand:
+    """The points of the partition test (bins): above the floor band and below the highest ceiling; the
+    test's tolerance (bins), its chunk (bins) and the ceiling band (z bins)."""
+
+    pu: np.ndarray
+    pv: np.ndarray
+    pz: np.ndarray
+    z_lo: int
+    tol: int
+    cb: int
+    ceil_band: int
+
+
+def _partition_band(ceiling: Occupancy, p: CeilingSettings, bin_width: float, z_bin: float, c: int,
+                    points, floor_z) -> _PartitionBand:
+    """The points that may hold a partition under some step line (see :func:`step_lines`)."""
+    px = ceiling.pixel
+    bz = np.asarray(points[2])
+    z_lo = floor_z + int(round(p.floor_band / z_bin))
+    top = int(np.max(ceiling.height))
+    band = (bz >= z_lo) & (bz < top)  # the vertical band of every line lies within this one
+    pu, pv, pz = np.asarray(points[0])[band], np.asarray(points[1])[band], bz[band]
+    tol = int(round(p.partition_tolerance / bin_width))
+    cb = c * px
+    ceil_band = int(round(p.ceiling_band / z_bin))
+    return _PartitionBand(pu, pv, pz, z_lo, tol, cb, ceil_band)
+
+
+def _held_runs(r, mask: np.ndarray, lower: np.ndarray, normal: np.ndarray, along: np.ndarray,
+               band: _PartitionBand, n0: int, a0: int, px: int, p: CeilingSettings) -> tuple:
+    """The runs of the step line ``r`` (in ``band.cb`` chunks) under which a partition stands."""
+    cb, tol, z_lo, pz = band.cb, band.tol, band.z_lo, band.pz
+    # the line's position in each chunk: the mean of its steps there (its cut where it has none)
+    lo, hi = (r.lo if r.lo is not None else r.cut), (r.hi if r.hi is not None else r.cut)
+    m = mask[lo:hi + 1]
+    cnt = m.sum(axis=0)
+    pos = np.where(cnt > 0, (m * np.arange(lo, hi + 1)[:, None]).sum(axis=0) / np.maximum(cnt, 1), r.cut)
+    centre = n0 + pos * px
+    z_hi = float(np.median(lower[lo:hi + 1][m])) - band.ceil_band  # under the lower ceiling
+    if p.both_halves:  # points at all heights, not furniture only: in each half of the band
+        mid = 0.5 * (z_lo + z_hi)
+        low_half, high_half = pz < mid, (pz >= mid) & (pz < z_hi)
+        held = (partition_support(normal[low_half], along[low_half], a0, cb, centre, tol)
+                & partition_support(normal[high_half], along[high_half], a0, cb, centre, tol))
+    else:
+        sel = pz < z_hi
+        held = partition_support(normal[sel], along[sel], a0, cb, centre, tol)
+    # a run's end chunks are left out: the walls it meets stand there under a soffit's edge too
+    return tuple((a0 + a * cb, a0 + b * cb) for a, b in r.runs
+                 if b - a > 2 and held[a + 1:b - 1].mean() >= p.min_partition)
