@@ -41,8 +41,9 @@ PARSE_TARGET_S = 60.0
 
 def _first_pass_inputs(store, client):
     """The frame, grid, storeys and one box per storey, as parse_spaces has them before its first slicing pass."""
+    from engine.spaces.document import SpaceParse
     from engine.spaces.histograms import BoxIndex, Grid
-    from engine.spaces.parse import SpaceParse, SpaceSettings
+    from engine.spaces.settings import SpaceSettings
 
     parse = SpaceParse.load(store)
     p = SpaceSettings.from_config()

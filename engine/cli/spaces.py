@@ -42,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
     from engine.outputs.floorplan import draw_floorplan
     from engine.outputs.geojson import write_spaces_geojson
     from engine.pipeline.cluster import check_reachable, cluster_client
-    from engine.spaces.parse import SpaceSettings, parse_spaces
+    from engine.spaces.parse import parse_spaces
+    from engine.spaces.settings import SpaceSettings
     from tiles.store import open_store
 
     store = open_store(args.store, args.storage_options)

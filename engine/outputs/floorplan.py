@@ -17,7 +17,7 @@ import numpy as np
 
 from engine import config
 from engine.spaces.alignment import Frame
-from engine.spaces.parse import SpaceParse
+from engine.spaces.document import SpaceParse
 from tiles.store import TileStore
 from tiles.tasks import run_tasks
 

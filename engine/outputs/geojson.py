@@ -10,7 +10,7 @@ import json
 import os
 from typing import Any
 
-from engine.spaces.parse import SpaceParse
+from engine.spaces.document import SpaceParse
 
 
 def spaces_feature_collection(parse: SpaceParse, crs_wkt: str | None = None) -> dict[str, Any]:

@@ -33,7 +33,7 @@ import numpy as np
 
 from engine.detection.proposals import Proposal
 from engine.spaces.alignment import Frame
-from engine.spaces.parse import Face, SpaceParse
+from engine.spaces.document import Face, SpaceParse
 from tiles.classes import CLASS_CODES
 
 CEILING, FLOOR, WALL = CLASS_CODES["ceiling"], CLASS_CODES["floor"], CLASS_CODES["wall"]

@@ -32,7 +32,7 @@ def _features(spaces: Any) -> list[dict[str, Any]]:
         spaces = spaces.get("features", [])
     out = []
     for s in spaces:
-        if not isinstance(s, dict):  # an engine.spaces.parse.Space
+        if not isinstance(s, dict):  # an engine.spaces.document.Space
             s = {"id": s.id, "footprint": s.footprint, "z_range": s.z_range, "point_count": s.point_count}
         if s.get("type") == "Feature":
             props = dict(s.get("properties") or {})
@@ -74,7 +74,7 @@ def space_statistics(spaces: Any, elements: Iterable[dict[str, Any]]) -> dict[st
     spaces
         The ``spaces.geojson`` FeatureCollection (or its features), or space dicts with ``id``,
         ``footprint`` (GeoJSON geometry) and optionally ``z_range`` / ``point_count``, or
-        :class:`engine.spaces.parse.Space` objects.
+        :class:`engine.spaces.document.Space` objects.
     elements
         ``elements.json`` records (``class`` or ``class_code``, ``space_id``, ``size``).
 

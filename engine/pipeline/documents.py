@@ -70,7 +70,7 @@ def _restore_tile(tile: str, store: TileStore, lut: np.ndarray) -> int:
 
 def restore_parsed(store: TileStore, parsed, client) -> None:
     """Undo an earlier run's space update, so a redone stage starts from the parsed spaces."""
-    from engine.spaces.parse import DOC
+    from engine.spaces.document import DOC
     from tiles.tasks import run_tasks
 
     if store.doc(DOC) == store.doc(SPACES_PARSED_DOC):

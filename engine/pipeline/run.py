@@ -152,7 +152,9 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
 
 def _spaces_stage(ctx: RunContext, fp_ingest: str):
     """Spaces (paper 3.1); returns the parsed spaces and the stage's fingerprint."""
-    from engine.spaces.parse import SpaceParse, SpaceSettings, parse_spaces
+    from engine.spaces.document import SpaceParse
+    from engine.spaces.parse import parse_spaces
+    from engine.spaces.settings import SpaceSettings
 
     store = ctx.store
     fp = fingerprint("spaces", SpaceSettings.from_config().to_dict(), fp_ingest)
@@ -241,7 +243,7 @@ def _crf_stage(ctx: RunContext, model, proposals: list, fp_det: str) -> tuple[li
 
 def _update_stage(ctx: RunContext, parsed, elements: list, fp_crf: str):
     """Space update (paper 4.2); returns the final spaces and the stage's fingerprint."""
-    from engine.spaces.parse import SpaceParse
+    from engine.spaces.document import SpaceParse
     from engine.spaces.update import UpdateSettings, update_spaces
 
     store, update = ctx.store, ctx.options.update

@@ -1,31 +1,9 @@
 """The building's main horizontal axes: a Manhattan-frame estimate reduced over tiles (paper section 3.1.1).
 
-Gravity is z.  The paper aligns x-y with PCA; PCA follows the building's
-outline and is pulled off by clutter and by L- or U-shaped plans, so we
-estimate the dominant orientation of wall-like structure instead, in two
-passes over the tiles:
-
-1. **Evidence** (one task per tile): a 2-D density image of the tile's points
-   (``pixel`` metres), ``log(1 + count)`` so that density does not matter, its
-   Gaussian-derivative gradient, and the histogram of gradient orientations
-   modulo 90 degrees weighted by gradient magnitude.  Walls are lines of
-   stacked points, so their gradients point along the building's axes; floors
-   and ceilings are flat and vote little.  The per-tile histograms are summed
-   and the peak of the (circularly smoothed) sum is the coarse yaw.  The
-   per-tile histograms are kept (``meta/alignment``) so that a later step can
-   give a wing at an angle its own frame.
-2. **Refinement** (one small task per tile, on a sample of the tile's "wall
-   pixels" kept by the evidence pass, so the tiles are read once): the wall
-   pixels of a finer density image (at least ``wall_factor`` times the tile's
-   median occupied pixel) are projected on both axes for yaws within ``refine_range`` of the coarse one;
-   the sharpness (sum of squared bin counts) of those projections is summed
-   over tiles and its maximum, interpolated by a parabola, is the yaw.  Sharp
-   projections mean walls fall in few bins: the frame is aligned.
-
-The yaw is reported in [0, 180) degrees with the first aligned axis ``u``
-along the building's longer aligned extent; the second axis ``v`` is ``u``
-turned +90 degrees.  ``aligned = R(-yaw) (world - origin)`` with z unchanged
-apart from the origin shift (see :class:`Frame`).
+Two passes over the tiles: per-tile evidence (the histogram of density-image gradient orientations modulo 90
+degrees, kept in ``meta/alignment``), then refinement of the yaw by the sharpness of the wall pixels'
+projections.  ``aligned = R(-yaw) (world - origin)`` (see :class:`Frame`).  Why and how:
+``docs/design/spaces.md`` (the building's frame).
 """
 from __future__ import annotations
 

@@ -1,90 +1,9 @@
 """Ceiling dividers: where a ceiling stops, or changes height, there is a wall (issue 8: hard buildings).
 
-A room is closed above by its ceiling, a horizontal surface inside its
-storey.  Some spaces have none there: a **stair tower** is a shaft through the
-slabs, whose ceiling lies in the next storey (the underside of the slab above
-the well), and an atrium or a double-height hall is open to the storey above.
-Seen from a storey's upper band (above door height), such a space shows its
-walls and the flight rising through it, but no horizontal surface above.
-
-Peak-gap-peak (:mod:`engine.spaces.dividers`) measures a wall's void against the room
-level *in the upper band* on both sides of a face, and the ridge search
-(:mod:`engine.spaces.ridges`) needs a scanned ceiling on both sides: beside a shaft
-the room level on the shaft's side is nothing, so neither can find the wall
-between the shaft and its lobby, and the face reads open (h500-2storeys: the
-lobby merged with the stair tower).  Yet a ceiling that stops at a line is
-itself the evidence of a boundary: the part of a storey under a ceiling and
-the part with none are not one room.  So, in the refinement of a large space
-(:mod:`engine.spaces.refine`, where the space's points are in memory), a face without
-a divider whose one side has a ceiling along most of it and whose other side
-has none gets a ``"ceiling"`` divider (:func:`ceiling_dividers`).  Faces with
-a ceiling on both sides (rooms of different ceiling heights included) or on
-neither (inside the shaft, an unscanned room) are left as they were.
-
-*The ceiling* is told from walls and from the rest of the upper band by its
-shape (:meth:`engine.spaces.ridges.Occupancy.build` with ``max_span``): on a raster of
-``pixel`` metres, a pixel is ceiling where its upper-band points lie within
-``span`` metres of one height (a horizontal surface: scan noise and
-registration offsets of a few cm), not where they run down the upper band (a
-wall, a shaft's wall beside its landing: 0.3 m and more, from door height to
-the ceiling).  A side has a ceiling along a stretch of the face where such a
-pixel lies within ``side`` metres of it, and along the face where it has one
-along at least ``min_scanned`` of it.
-
-**Step lines.**  A room has one ceiling, and neighbouring rooms often have
-different ones (a hallway lowered for ducts, a higher lobby or conference
-room).  A line along which the ceiling changes height is a wall even where
-its points show no void and no ridge: a glazed partition returns few points
-(no ridge) and has no void between two faces, but the two rooms' ceilings
-still meet at it at two heights.  :func:`step_lines` finds such lines on the
-same raster (each ceiling pixel's height: the top of its points), the way
-ridge lines are found (:mod:`engine.spaces.ridges`): in every ``chunk`` along an
-axis, a pixel boundary is a step where the ``level_window`` metres on each
-side are each covered by ceiling (``min_scanned``) *at one height* (their
-spread between the 10 % and 90 % quantiles is below ``step``) and the two
-heights differ by at least ``step``; steps are followed from chunk to chunk
-and a line runs ``min_run`` metres at least.  A beam or a light panel under
-the ceiling is no step: beside it a window holds the ceiling too (or the
-beam's shadow on the ceiling, which is not scanned), so it is not at one
-height; ``level_window`` (1 m, the room level's reach in the void test) is
-wider than a beam and its shadow.  ``step`` (0.1 m) is well above the height
-noise of a scanned ceiling (scan noise and registration offsets of a few cm;
-a light panel's few cm).  The refinement adds the step lines to the ridge
-lines: slicing cuts at them, and merging divides the stretch of a face they
-cover.
-
-**A partition under the step.**  A ceiling also changes height where no wall
-stands: the free edge of a soffit or bulkhead along one side of an open-plan
-office or a lobby, a dropped ceiling over a reception area.  Seen from above
-such an edge is a step like any other; what tells it from a partition is
-below it.  A partition stands from the floor to the ceiling: glass returns
-few points, but some, and its mullions and rails, a door leaf or the glass or
-transom over a door return points at normal density, so nearly every
-stretch of the line holds some.  Under a soffit's edge there is open air:
-only the furniture that happens to stand there.  So a run of a step line
-divides only where at least ``min_partition`` (0.5: most) of its
-``ridges.chunk`` stretches hold a point within ``partition_tolerance`` (0.1
-m: the step is located to a pixel of the raster, and a partition's faces lie
-half its thickness from its middle) of the line's position in that stretch,
-between the *floor band* (``floor_band`` over the storey's floor: the floor,
-skirtings, floor tracks) and the *ceiling band* (``ceiling_band`` under the
-lower of the two ceilings: head tracks, trims, light fittings and the
-soffit's own face), which hold points under a soffit's edge too
-(:func:`partition_support`).  A stretch holds the partition only with a point
-in *each half* of that band (``both_halves``): a partition stands at all
-heights, while desks, chairs, counters and low cabinets, which may well stand
-under a soffit's edge, stay in the lower half (one band alone let three desks
-across a 6 m soffit edge make it a wall), and pendant lights or signs hang in
-the upper half only.  An open doorway in a partition holds nothing in the
-lower half for a stretch or two: ``min_partition`` 0.5 leaves room for doors
-(0.9 lost a glazed partition with an open door on a hard building).  The
-run's two end stretches are left out: the walls it meets stand there under a
-soffit's edge too.  What it
-still cannot tell: tall furniture (shelves, tall cabinets) standing under a
-soffit's edge along most of its length makes it a wall; a partition whose
-glass returns (almost) nothing, with mullions about 1 m apart or more and
-no door, may not be one (the two rooms then stay one space, as before the step
-lines).
+In the refinement of a large space, a face between a side with a ceiling in the storey and a side without
+one (a stair shaft beside its lobby) is divided (:func:`ceiling_dividers`), and lines along which the ceiling
+changes height with a partition below (:func:`step_lines`, :func:`partition_support`) cut and divide like
+ridge lines.  Why and how, and what it cannot tell: ``docs/design/spaces.md`` (ceiling dividers).
 """
 from __future__ import annotations
 
@@ -255,15 +174,7 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
     rp = dataclasses.replace(ridge_params, drift=pm, width=pm)
     need = p.step / z_bin
     sp = int(round(ridge_params.min_spacing / bin_width))
-    if test:
-        bz = np.asarray(points[2])
-        z_lo = floor_z + int(round(p.floor_band / z_bin))
-        top = int(np.max(ceiling.height))
-        band = (bz >= z_lo) & (bz < top)  # the vertical band of every line lies within this one
-        pu, pv, pz = np.asarray(points[0])[band], np.asarray(points[1])[band], bz[band]
-        tol = int(round(p.partition_tolerance / bin_width))
-        cb = c * px
-        ceil_band = int(round(p.ceiling_band / z_bin))
+    band = _partition_band(ceiling, p, bin_width, z_bin, c, points, floor_z) if test else None
     out: list[RidgeLine] = []
     for axis in (0, 1):
         h = ceiling.height if axis == 0 else ceiling.height.T
@@ -275,8 +186,8 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
             diff = np.abs(before - after)
             mask = ((cov_b >= p.min_scanned) & (cov_a >= p.min_scanned) & (diff >= need)
                     & (spread_b < need) & (spread_a < need))
-        if test:
-            normal, along = (pu, pv) if axis == 0 else (pv, pu)
+        if band is not None:
+            normal, along = (band.pu, band.pv) if axis == 0 else (band.pv, band.pu)
             lower = np.fmin(before, after)  # the lower ceiling's level at each step (z bins)
         for r in ridge_lines(mask, np.nan_to_num(diff), axis, 0, 0, 1, rp, pm):
             line = RidgeLine(axis, n0 + r.cut * px, tuple((a0 + a * c * px, a0 + b * c * px) for a, b in r.runs),
@@ -285,27 +196,63 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
             if any(q.axis == axis and abs(q.cut - line.cut) < sp
                    and any(q.covered(a, b) for a, b in line.runs) for q in ridges):
                 continue
-            if test:
-                # the line's position in each chunk: the mean of its steps there (its cut where it has none)
-                lo, hi = (r.lo if r.lo is not None else r.cut), (r.hi if r.hi is not None else r.cut)
-                m = mask[lo:hi + 1]
-                cnt = m.sum(axis=0)
-                pos = np.where(cnt > 0, (m * np.arange(lo, hi + 1)[:, None]).sum(axis=0) / np.maximum(cnt, 1), r.cut)
-                centre = n0 + pos * px
-                z_hi = float(np.median(lower[lo:hi + 1][m])) - ceil_band  # under the lower ceiling
-                if p.both_halves:  # points at all heights, not furniture only: in each half of the band
-                    mid = 0.5 * (z_lo + z_hi)
-                    low_half, high_half = pz < mid, (pz >= mid) & (pz < z_hi)
-                    held = (partition_support(normal[low_half], along[low_half], a0, cb, centre, tol)
-                            & partition_support(normal[high_half], along[high_half], a0, cb, centre, tol))
-                else:
-                    sel = pz < z_hi
-                    held = partition_support(normal[sel], along[sel], a0, cb, centre, tol)
-                # a run's end chunks are left out: the walls it meets stand there under a soffit's edge too
-                runs = tuple((a0 + a * cb, a0 + b * cb) for a, b in r.runs
-                             if b - a > 2 and held[a + 1:b - 1].mean() >= p.min_partition)
+            if band is not None:
+                runs = _held_runs(r, mask, lower, normal, along, band, n0, a0, px, p)
                 if not runs:
                     continue
                 line = dataclasses.replace(line, runs=runs)
             out.append(line)
     return out
+
+
+@dataclass
+class _PartitionBand:
+    """The points of the partition test (bins): above the floor band and below the highest ceiling; the
+    test's tolerance (bins), its chunk (bins) and the ceiling band (z bins)."""
+
+    pu: np.ndarray
+    pv: np.ndarray
+    pz: np.ndarray
+    z_lo: int
+    tol: int
+    cb: int
+    ceil_band: int
+
+
+def _partition_band(ceiling: Occupancy, p: CeilingSettings, bin_width: float, z_bin: float, c: int,
+                    points, floor_z) -> _PartitionBand:
+    """The points that may hold a partition under some step line (see :func:`step_lines`)."""
+    px = ceiling.pixel
+    bz = np.asarray(points[2])
+    z_lo = floor_z + int(round(p.floor_band / z_bin))
+    top = int(np.max(ceiling.height))
+    band = (bz >= z_lo) & (bz < top)  # the vertical band of every line lies within this one
+    pu, pv, pz = np.asarray(points[0])[band], np.asarray(points[1])[band], bz[band]
+    tol = int(round(p.partition_tolerance / bin_width))
+    cb = c * px
+    ceil_band = int(round(p.ceiling_band / z_bin))
+    return _PartitionBand(pu, pv, pz, z_lo, tol, cb, ceil_band)
+
+
+def _held_runs(r, mask: np.ndarray, lower: np.ndarray, normal: np.ndarray, along: np.ndarray,
+               band: _PartitionBand, n0: int, a0: int, px: int, p: CeilingSettings) -> tuple:
+    """The runs of the step line ``r`` (in ``band.cb`` chunks) under which a partition stands."""
+    cb, tol, z_lo, pz = band.cb, band.tol, band.z_lo, band.pz
+    # the line's position in each chunk: the mean of its steps there (its cut where it has none)
+    lo, hi = (r.lo if r.lo is not None else r.cut), (r.hi if r.hi is not None else r.cut)
+    m = mask[lo:hi + 1]
+    cnt = m.sum(axis=0)
+    pos = np.where(cnt > 0, (m * np.arange(lo, hi + 1)[:, None]).sum(axis=0) / np.maximum(cnt, 1), r.cut)
+    centre = n0 + pos * px
+    z_hi = float(np.median(lower[lo:hi + 1][m])) - band.ceil_band  # under the lower ceiling
+    if p.both_halves:  # points at all heights, not furniture only: in each half of the band
+        mid = 0.5 * (z_lo + z_hi)
+        low_half, high_half = pz < mid, (pz >= mid) & (pz < z_hi)
+        held = (partition_support(normal[low_half], along[low_half], a0, cb, centre, tol)
+                & partition_support(normal[high_half], along[high_half], a0, cb, centre, tol))
+    else:
+        sel = pz < z_hi
+        held = partition_support(normal[sel], along[sel], a0, cb, centre, tol)
+    # a run's end chunks are left out: the walls it meets stand there under a soffit's edge too
+    return tuple((a0 + a * cb, a0 + b * cb) for a, b in r.runs
+                 if b - a > 2 and held[a + 1:b - 1].mean() >= p.min_partition)

@@ -1,51 +1,9 @@
 """Peak-gap-peak space dividers on a 1-D density histogram (paper section 3.1.1).
 
-A space divider (a wall, a floor slab) shows in the histogram of point
-coordinates along an axis as *two peaks with a void between them*: the two
-scanned faces and the unscanned inside.  It is found by template matching with
-a bank of peak-gap-peak filters, max-pooling over the bank, non-maximum
-suppression and scale-free thresholds.
-
-The filter (paper): ``g_{δ,c}(s) = 1/(2c)·Π_{δ/2+c}(s) − 1/(2c)·Π_{δ/2}(s)`` with
-pass width ``c`` (each margin) and stop width ``δ`` (the gap).  Written as it is
-the formula is the mean density of the two margins only, which answers a lone
-strong peak (a bookcase face) as well as a wall.  We keep its two margins and
-subtract the mean of the gap (a negative lobe), and the tests below make it a
-peak-gap-peak detector::
-
-    L, R, G = mean density of the left margin, right margin, gap    (points per bin)
-    I = room level: the lower of the median densities of room_window metres beyond each margin
-    r_{δ,c}(s) = (L + R) / 2 − G,      score = r / I   (scale-free)
-
-Responses are computed for every position and every ``(δ, c)`` with cumulative
-sums; those that pass the tests below are max-pooled over ``(δ, c)`` by their
-score and suppressed to the maxima at least ``min_spacing`` apart (non-maximum
-suppression).  All tests are ratios of densities, so the same dividers come
-out at any point density:
-
-* contrast: ``G ≤ (1 − min_contrast) · min(L, R)``: the gap is empty next to
-  *both* margins (a lone peak beside the room's own level fails);
-* prominence: ``max(L, R) − G ≥ min_prominence · I``: the void is bounded by a
-  scanned face standing well above the room level, not just the edge of an
-  unscanned hole (the other face may be missing: a wall seen from one side);
-* void: ``G ≤ max_void_ratio_full · I``.  Inside a room the floor and ceiling
-  make the histogram never drop far below the room's level, so a gap much
-  emptier than the rooms on both sides is a cut through floor and ceiling: a
-  wall, not an aisle between two bookcases nor a beam (whose bottom face and
-  the floor below fill its gap).  Door leaves, jambs and thresholds fill a
-  wall's gap below door height, so when the histogram of the *upper band*
-  (points above door height) is given and holds enough points beside the gap,
-  all the tests are made on it instead, with ``max_void_ratio`` (strict): there
-  a wall is solid over its doors while a room's ceiling (and a beam's bottom
-  face) is continuous;
-* evidence: the gap would hold at least ``min_gap_points`` points at the weaker
-  margin's density (too few points say nothing; a count, not a density).
-
-Separately, runs of empty bins at least ``empty_run`` long are *empty voids*:
-nothing at all was scanned there, so they separate whatever lies on each side
-(and trim the ends of a histogram).  :func:`nearly_empty_runs` is the same
-with a tolerance for stray points (flying points, reflections), used across
-the shared faces of merging.
+A wall or a slab shows as two peaks (its scanned faces) with a void between them, found by a bank of
+peak-gap-peak filters with scale-free tests (contrast, prominence, void against the room level, evidence);
+runs of empty bins are empty voids.  The filter and its tests: ``docs/design/spaces.md`` (peak-gap-peak
+dividers).
 """
 from __future__ import annotations
 

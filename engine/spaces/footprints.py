@@ -35,3 +35,21 @@ def union_geojson(geoms: list[dict[str, Any]]) -> tuple[dict[str, Any], float]:
         return {"type": "Polygon", "coordinates": []}, 0.0
     world = shapely.set_precision(shapely.union_all(shapes), 1e-4)
     return mapping(world), float(world.area)
+
+
+def clipped_footprint(rects: list[list[float]], frame: Frame, clip_rects: list[list[float]], clip_frame: Frame
+                      ) -> tuple[dict[str, Any], float]:
+    """GeoJSON (world) and area of the union of ``rects`` (in ``frame``) within the union of ``clip_rects``.
+
+    A refined space's cells are boxes of its own frame that may reach beyond the
+    space: its footprint is their union clipped to the space it came from.
+    """
+    def world(rs: list[list[float]], fr: Frame):
+        c, s = fr.cos_sin
+        g = shapely.union_all([box(*r) for r in rs])
+        return affinity.affine_transform(g, [c, -s, s, c, fr.origin[0], fr.origin[1]])
+
+    if not rects or not clip_rects:
+        return {"type": "Polygon", "coordinates": []}, 0.0
+    geom = shapely.set_precision(world(rects, frame).intersection(world(clip_rects, clip_frame)), 1e-4)
+    return mapping(geom), float(geom.area)

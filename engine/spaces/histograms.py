@@ -84,7 +84,7 @@ class Grid:
 
     def tile_bins(self, store, tile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(bu, bv, bz)`` of every point of a tile (a store that keeps its bins, such as the in-memory store
-        of a refined space, :class:`engine.spaces.refine.MemoryStore`, hands out its read-only copy)."""
+        of a refined space, :class:`engine.spaces.memory_store.MemoryStore`, hands out its read-only copy)."""
         cached = getattr(store, "cached_bins", None)
         if cached is not None:
             return cached(self, tile)
@@ -326,7 +326,7 @@ def histogram_pass(fn, tiles: list[str], lo: np.ndarray, length: np.ndarray, *, 
 
     The driver holds one batch of tile results at a time (``buildingparser.spaces.batch-tiles``
     tiles), so its memory does not grow with the building.  A store (``extra_args[0]``) whose tiles'
-    data are futures on the workers (:class:`engine.spaces.refine.PieceStore`) gives them as the tasks'
+    data are futures on the workers (:class:`engine.spaces.memory_store.PieceStore`) gives them as the tasks'
     inputs (``task_input``), so that each task runs where its data is.
     """
     from engine import config

@@ -1,56 +1,9 @@
 """Merging the over-segmented cells into spaces (paper section 3.1.2).
 
-The neighbour graph has one node per cell and one edge per pair of cells of a
-storey that share a face at least ``min_face`` long (a cell ends where the
-other begins along one axis and their ranges overlap along the other).  Each
-edge is tested for a divider *across its face, restricted to the face's
-overlap*: the histogram along the face's normal of the points of the two cells
-whose other coordinate lies in the overlap, within ``window`` metres of the
-face.  All edges' histograms come from ONE pass over the tiles
-(:func:`engine.spaces.histograms.edge_histograms`) and each edge's test is a task.
-
-An edge keeps the two cells apart when the same peak-gap-peak filter finds a
-divider whose void contains the face (``|position - face| <= width / 2 +
-margin``), or when an empty run at least ``empty_run`` long touches the face
-(nothing connects the two sides).  An empty run tolerates stray points: a run
-whose density, averaged over ``empty_smooth`` metres, stays at most
-``empty_fraction`` of the scanned side's room level counts as empty (flying
-points and reflections of a real scan broke the strict run, and an unscanned
-stretch then connected its two sides).
-
-The paper merges neighbouring cells unless a divider separates them, i.e. the
-connected components of the edges without a divider.  Measured on generated
-buildings with the difficulties of real scans (``benchmarks.bench_hard``),
-that is fragile: ONE missed divider (a glass partition, a wall smeared by
-registration errors or hidden by furniture, a cell that straddles a wall)
-chains two rooms, and through them every room beyond, into one space (hard
-set mean ARI 0.349 while the over-segmented cells scored 0.63).  The edge
-tests themselves cannot tell such a leaky face from an opening (measured: a
-relaxed peak-gap-peak test, the density at the face and in the upper band
-overlap between the two), so the robustness comes from the graph: merging is
-an agglomeration, most open pair of groups first (:func:`agglomerate`).  The
-openness of two groups is the length of the faces without a divider between
-them over the smaller group's boundary; a pair joins only when it is at least
-``min_open_ratio``.  The cells of one room share long faces (the room's
-width) and join; a leaky face is a small fraction of two rooms' boundaries
-and no longer chains them.  A face between a scanned cell and a nearly
-unscanned one (``min_scanned_density``) does not count: it shows only that
-one side was not seen (unscanned rooms, the surroundings with flying points
-bridged rooms).  Measured: hard set 0.349 -> 0.649, every clean building of
-``benchmarks.bench_spaces`` unchanged; with only the robust empty runs the
-hard set gains 0.04 (the two are complementary but the agglomeration is most
-of it).  What remains is mostly cells that straddle a wall (slicing), which
-no merging can undo.
-
-Groups that cannot be a space on their own are then absorbed, smallest first,
-into the neighbouring space with the longest shared face without a divider (if
-they have none, with a divider; faces the agglomeration refused count as
-without a divider here: absorption joins ONE neighbour, so it cannot chain):
-spaces of less than ``min_space_area`` m², or narrower than
-``min_space_width`` m (slivers between two nearby cuts), or with fewer points
-per m² than ``min_relative_density`` times the median space.
-A weak space with no neighbour at all is noise beyond the building: its points
-get no space (-1).
+Every shared face of two cells is tested for a divider (one histogram pass, one task per face); the cells are
+then agglomerated through the faces without one, most open pair of groups first (:func:`agglomerate`: a
+leaky face does not chain two rooms), and weak groups absorbed.  Why and how, with the measurements:
+``docs/design/spaces.md`` (merging).
 """
 from __future__ import annotations
 

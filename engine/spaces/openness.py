@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from engine.spaces.alignment import Frame
-from engine.spaces.parse import Face
+from engine.spaces.document import Face
 from tiles.tasks import run_tasks
 
 

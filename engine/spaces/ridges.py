@@ -1,48 +1,9 @@
 """Ridge dividers: walls seen as ONE dense surface, with no void to find (issue 8: hard buildings).
 
-A wall shows in a 1-D histogram as two scanned faces with the unscanned
-inside between them (peak-gap-peak, :mod:`engine.spaces.dividers`).  On real scans
-that void is often gone: the two rooms were registered a few centimetres
-apart (the faces of a thin wall overlap) or turned by a fraction of a degree
-(over a long wall the faces smear into each other), or the wall is glass.
-What is left is a *ridge*: a narrow band whose density above door height
-stands far above the room level (the ceiling) on both sides.
-
-A ridge in one histogram is weak evidence: a column's face, a beam, a
-cabinet's top or a stack of boxes makes one too.  What tells a wall apart is
-that it runs *continuously along a line*: the test is made in 2-D, on the
-upper-band points (above door height) of one space:
-
-1. the points are binned ``bin_width`` across the candidate wall (its normal
-   axis) and ``chunk`` metres along it;
-2. in each chunk, a position is a ridge when the mean density of the
-   ``width`` metres starting there, counting only the points of the *low
-   slice* (the lowest ``low`` metres of the upper band), is at least
-   ``ratio`` times the chunk's room level (the median density of the chunk's
-   occupied stretch in the whole upper band, i.e. the ceiling), and the
-   ``side`` metres beyond ``gap`` on *each* side hold at least ``min_side``
-   room levels of upper-band points (scanned on both sides: not an exterior
-   wall, which empty runs handle).  A wall reaches down through the low
-   slice; a ceiling beam (its bottom well above the doors), light panels and
-   the ceiling itself do not, and furniture ends below it;
-3. ridges are tracked from chunk to chunk: one continues in the next chunk
-   when it lies within ``drift`` metres of it (a wall at a fraction of a
-   degree to the frame drifts; the two faces of a wall registered apart are
-   two nearby ridges of one line), gaps up to ``max_gap`` metres bridged;
-4. a run at least ``min_run`` metres long is a *ridge line*, at the median
-   position of its ridges.  Of two lines closer than ``min_spacing`` along
-   the same stretch the longer is kept.
-
-A column grid, a pier or a beam across a hallway makes ridges in the chunks
-it occupies only: its runs stay below ``min_run`` and it is no ridge line;
-cubicle partitions and most furniture end below the upper band.
-
-Ridge lines are used by the refinement of large spaces (:mod:`engine.spaces.refine`,
-where a space's points are in memory): slicing also cuts a box at a ridge line
-that runs at least ``min_run`` within it (:func:`box_cuts`), and merging keeps
-two cells apart along the stretch of a face without a void divider that a
-ridge line covers (:func:`face_pieces`: the face is cut in pieces, the rest
-stays open).
+In the refinement of a large space, a wall whose void is gone (faces registered apart, glass) still runs
+continuously along a line above door height: ridges found per chunk of the upper band are followed from
+chunk to chunk into ridge lines, which cut boxes (:func:`box_cuts`) and divide faces (:func:`face_pieces`).
+Why and how: ``docs/design/spaces.md`` (ridge dividers).
 """
 from __future__ import annotations
 

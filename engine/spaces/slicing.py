@@ -1,32 +1,8 @@
 """Slicing the building into an over-segmented set of cells with peak-gap-peak dividers (paper 3.1.1).
 
-Order of the axes (the paper leaves it open):
-
-1. **z first, over the whole building**: storeys are separated by the void
-   between a ceiling and the next floor (a slab is a divider).  One histogram.
-2. **Then alternately along the first and the second horizontal axis, per
-   storey, recursively**: dividers along ``u`` cut each storey into slices,
-   each slice is cut along ``v`` (the paper's two steps), and every resulting
-   box is searched again along ``u``, then ``v``... until a box has been
-   searched along both axes without a new divider (or ``max_levels``).  The
-   recursion finds walls that span only part of the building, whose void is
-   filled in a whole-storey histogram by the rooms beside them; the paper
-   only goes one level deep.
-
-The upper band of a storey (points more than ``upper_band`` metres above its
-floor, i.e. above the doors) gets its own histogram in the same bincount: the
-void test is made there, where a wall is solid and a room's ceiling continuous
-(see :func:`engine.spaces.dividers.detect_dividers`).
-
-Every divider is elongated across the box it was found in, so the boxes
-over-segment the spaces; :mod:`engine.spaces.merging` merges them back.
-
-Each level is ONE pass over the tiles (:func:`engine.spaces.histograms.segment_histograms`:
-all active boxes' histograms from one bincount per tile, summed) and one task
-per box for its divider search.  Besides peak-gap-peak dividers, runs of at
-least ``empty_run`` metres without any point cut a box too (nothing was
-scanned there: whatever lies on the two sides is not connected) and are left
-out of every box; that also trims the empty ends of a box.
+Storeys first (z, over the whole building), then recursively along ``u`` and ``v`` per storey, one pass over
+the tiles per level and one task per box searched; the void test is made in the upper band.
+:mod:`engine.spaces.merging` merges the cells back.  Why and how: ``docs/design/spaces.md`` (slicing).
 """
 from __future__ import annotations
 
@@ -256,25 +232,12 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
         active_ids = [i for i, b in enumerate(boxes) if not b.final]
         if not active_ids:
             break
-        index = BoxIndex.build(np.array(floors), np.array([b.row() for b in boxes]))
-        # per box: its axis (-1: final) and whether the other axis is wanted too (a box never searched)
-        axis_of = np.array([-1 if b.final else b.next_axis for b in boxes], dtype=np.int64)
+        # per box: whether the other axis is wanted too (a box never searched)
         both = np.array([(not b.final) and b.quiet == 0 for b in boxes], dtype=bool)
         # only the tiles that touch a box still searched
         tiles = names[tiles_touching(extents, np.array(floors), np.array([boxes[i].row() for i in active_ids]))]
-
-        # key 4 * box + 2 * (0: its axis, 1: the other) + band
-        lo = np.zeros((len(boxes), 2), dtype=np.int64)
-        length = np.zeros((len(boxes), 2), dtype=np.int64)
-        for i in active_ids:
-            b = boxes[i]
-            for which, ax in enumerate((b.next_axis, 1 - b.next_axis)):
-                if which == 0 or both[i]:
-                    lo[i, which], hi = b.range(ax)
-                    length[i, which] = hi - lo[i, which]
-        hists = histogram_pass(segment_histograms, list(tiles), np.repeat(lo.ravel(), 2),
-                               np.repeat(length.ravel(), 2), client=client, label=f"slicing pass {level}",
-                               extra_args=(store, grid, share(client, index), axis_of, both, band_z))
+        hists, lo = _level_histograms(store, grid, floors, boxes, active_ids, both, list(tiles), band_z, client,
+                                      level)
 
         def item(i: int, which: int) -> tuple[np.ndarray, np.ndarray, int, list[int]]:
             k = 4 * i + 2 * which
@@ -293,30 +256,7 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
         seconds = dict(zip(second_ids, run_tasks(_search, [item(i, 1) for i in second_ids], client=client,
                                                    label=f"dividers pass {level} (other axis)", keys=second_ids,
                                                    extra_args=(params,))))
-        new: list[Box] = [b for b in boxes if b.final]
-        n_div = 0
-        for i, sp in zip(active_ids, firsts):
-            b = boxes[i]
-            n_div += _record(dividers, b, b.next_axis, sp, level, bw)
-            if not _quiet(sp):
-                new += [b.with_range(b.next_axis, p0, p1, quiet=1, final=False, count=c, level=level,
-                                     next_axis=1 - b.next_axis) for p0, p1, c in sp.pieces]
-                continue
-            p0, p1, c = sp.pieces[0]
-            b = b.with_range(b.next_axis, p0, p1, count=c, level=level)
-            if i not in seconds:
-                new.append(dataclasses.replace(b, quiet=b.quiet + 1, final=b.quiet + 1 >= 2,
-                                               next_axis=1 - b.next_axis))
-                continue
-            sp2 = seconds[i]
-            other = 1 - b.next_axis
-            n_div += _record(dividers, b, other, sp2, level, bw)
-            if _quiet(sp2):
-                q0, q1, c2 = sp2.pieces[0]
-                new.append(b.with_range(other, q0, q1, quiet=2, final=True, count=c2))
-            else:
-                new += [b.with_range(other, q0, q1, quiet=1, final=False, count=c2, next_axis=b.next_axis)
-                        for q0, q1, c2 in sp2.pieces]
+        new, n_div = _next_boxes(boxes, active_ids, firsts, seconds, dividers, level, bw)
         stats.append({"pass": level, "searched": len(active_ids) + len(second_ids), "dividers": n_div,
                       "boxes": len(new), "tiles": len(tiles)})
         boxes = new
@@ -324,6 +264,58 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
         b.final = True
     boxes.sort(key=lambda b: (b.floor, b.u0, b.v0))
     return boxes, dividers, stats
+
+
+def _level_histograms(store, grid: Grid, floors: list[tuple[int, int]], boxes: list[Box], active_ids: list[int],
+                      both: np.ndarray, tiles: list[str], band_z: np.ndarray, client, level: int
+                      ) -> tuple[list[np.ndarray], np.ndarray]:
+    """One pass over ``tiles``: the histograms of the boxes still searched along their next axis, and along the
+    other too where ``both``, keyed ``4 * box + 2 * (0: its axis, 1: the other) + band``; and their first bins."""
+    index = BoxIndex.build(np.array(floors), np.array([b.row() for b in boxes]))
+    axis_of = np.array([-1 if b.final else b.next_axis for b in boxes], dtype=np.int64)  # -1: final
+    lo = np.zeros((len(boxes), 2), dtype=np.int64)
+    length = np.zeros((len(boxes), 2), dtype=np.int64)
+    for i in active_ids:
+        b = boxes[i]
+        for which, ax in enumerate((b.next_axis, 1 - b.next_axis)):
+            if which == 0 or both[i]:
+                lo[i, which], hi = b.range(ax)
+                length[i, which] = hi - lo[i, which]
+    hists = histogram_pass(segment_histograms, tiles, np.repeat(lo.ravel(), 2),
+                           np.repeat(length.ravel(), 2), client=client, label=f"slicing pass {level}",
+                           extra_args=(store, grid, share(client, index), axis_of, both, band_z))
+    return hists, lo
+
+
+def _next_boxes(boxes: list[Box], active_ids: list[int], firsts: list, seconds: dict[int, Any],
+                dividers: list[FoundDivider], level: int, bw: float) -> tuple[list[Box], int]:
+    """The boxes after a level's searches (``firsts``: along each active box's axis; ``seconds``: along the other
+    axis of the boxes never searched whose first was quiet); the dividers found appended to ``dividers``."""
+    new: list[Box] = [b for b in boxes if b.final]
+    n_div = 0
+    for i, sp in zip(active_ids, firsts):
+        b = boxes[i]
+        n_div += _record(dividers, b, b.next_axis, sp, level, bw)
+        if not _quiet(sp):
+            new += [b.with_range(b.next_axis, p0, p1, quiet=1, final=False, count=c, level=level,
+                                 next_axis=1 - b.next_axis) for p0, p1, c in sp.pieces]
+            continue
+        p0, p1, c = sp.pieces[0]
+        b = b.with_range(b.next_axis, p0, p1, count=c, level=level)
+        if i not in seconds:
+            new.append(dataclasses.replace(b, quiet=b.quiet + 1, final=b.quiet + 1 >= 2,
+                                           next_axis=1 - b.next_axis))
+            continue
+        sp2 = seconds[i]
+        other = 1 - b.next_axis
+        n_div += _record(dividers, b, other, sp2, level, bw)
+        if _quiet(sp2):
+            q0, q1, c2 = sp2.pieces[0]
+            new.append(b.with_range(other, q0, q1, quiet=2, final=True, count=c2))
+        else:
+            new += [b.with_range(other, q0, q1, quiet=1, final=False, count=c2, next_axis=b.next_axis)
+                    for q0, q1, c2 in sp2.pieces]
+    return new, n_div
 
 
 def _quiet(sp: Split) -> bool:

@@ -1,46 +1,11 @@
 """Updating the space parsing from the detected walls (paper 4.2).
 
-Space parsing (:mod:`engine.spaces.parse`) leaves a graph of neighbouring spaces: two
-spaces are neighbours where cells of theirs share a face, and the shared faces
-are the *connection areas* (``meta/spaces``: per neighbour, faces with ``axis``
-``u``/``v`` of the building's aligned frame, ``position`` along it, ``extent``
-along the other horizontal axis, world ``z_range``).  Here each neighbour edge
-is kept only where **no detected wall** lies in the connection area; the
-connected components of the kept edges are the final spaces.  Hallways cut in
-two by a false divider (a "bottleneck", paper 5.2) merge back; spaces with a
-wall between them stay apart.  The update only merges: a space is never split.
-
-When does a wall lie in a connection area?  Each wall (a world box with yaw,
-from the detections after the CRF) is taken into the aligned frame, and it
-*covers* the part of a face where all of these hold (``buildingparser.space-update.*``,
-``engine/spaces/update.yaml``):
-
-* it runs along the face: its long axis is within ``max-angle`` (20 deg) of the face;
-* the face lies within its thickness: the face's position falls inside the
-  wall's extent across the face, widened by ``distance`` (0.15 m) on each side;
-* it spans at least ``min-height`` (50 %) of the face's height;
-* the covered part is the overlap of the wall's extent along the face with the face.
-
-A pair stays separate when walls cover at least ``coverage`` (50 %) of the
-total length of the faces the two share (covered pieces of several walls are
-joined before measuring), so a wall with a door in it still separates, and a
-wall that only touches the face at an end (the side wall of a hallway) does not.
-
-The absence of a detected wall is not evidence of an opening (issue 23: where
-detection found few walls the paper's rule merged rooms wholesale, f707h ARI
-0.944 -> 0.458).  With ``evidence`` on (the default) a pair without a detected
-wall merges only when (:func:`weigh_evidence`) its faces carry no strong parse
-divider (:func:`strong_divider`; over ``divider-share`` of their length: kept
-whatever detection says) and the points across its other faces show them open
-(:mod:`engine.spaces.openness`: the floor runs through, no wall surface, one
-floor and one ceiling height on both sides).  Each pair records its ``reason``.
-
-New space ids: the components are numbered 0, 1, ... in the order of their
-smallest old id, so spaces keep their ids up to the first merge.  The per-point
-``space_id`` of every tile is rewritten by one task per tile (each writes its
-whole array), and ``meta/spaces`` is rewritten with the merged spaces (cells,
-footprints as the union of the old ones, z ranges, point counts, tiles,
-neighbours and their faces), its ``stats["space_update"]`` recording what was done.
+Each neighbour edge of the parse is kept where no detected wall covers the connection areas (the faces) of
+the two spaces; the connected components of the kept edges are the final spaces (the update only merges).
+A pair without a detected wall merges only on evidence (:func:`weigh_evidence`: no strong parse divider, the
+faces open in the points, :mod:`engine.spaces.openness`).  Spaces are renumbered in the order of their
+smallest old id; ``space_id`` and ``meta/spaces`` are rewritten.  Why and how: ``docs/design/spaces.md``
+(the space update).
 """
 from __future__ import annotations
 
@@ -55,7 +20,7 @@ import numpy as np
 
 from engine import config
 from engine.spaces.alignment import Frame
-from engine.spaces.parse import DOC, Face, Neighbour, Space, SpaceParse
+from engine.spaces.document import DOC, Face, Neighbour, Space, SpaceParse
 from tiles.classes import CLASS_CODES
 from tiles.tasks import run_tasks
 

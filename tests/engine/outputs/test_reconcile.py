@@ -7,7 +7,7 @@ import numpy as np
 
 from engine.detection.proposals import Proposal
 from engine.outputs.reconcile import reconcile_elements
-from engine.spaces.parse import SpaceParse
+from engine.spaces.document import SpaceParse
 from tests.engine.spaces.test_update import H, _doc, _frame
 from tiles.classes import CLASS_CODES
 

@@ -265,7 +265,7 @@ def test_killing_a_worker_mid_run_changes_nothing(building, first_run, tmp_path)
         def assassin():
             while not done.is_set() and not killed:
                 for worker, keys in cl.processing().items():
-                    if any(str(k).startswith(("_detect_task", "_label_tile")) for k in keys):
+                    if any(str(k).startswith(("_detect_task", "_label_tile", "label_tile")) for k in keys):
                         os.kill(pids[worker], signal.SIGKILL)
                         killed.append(str(next(iter(keys))))
                         return

@@ -150,14 +150,15 @@ def _refined_spaces(pts: np.ndarray, ceilings: CeilingSettings) -> int:
     """Spaces of the refinement of one storey (floor at z 0, upper band from 2.2 m) parsed from ``pts``."""
     from engine.spaces.alignment import Frame
     from engine.spaces.histograms import Grid
-    from engine.spaces.parse import SpaceSettings
-    from engine.spaces.refine import MemoryStore, _parse_part
+    from engine.spaces.memory_store import MemoryStore
+    from engine.spaces.part import parse_part
+    from engine.spaces.settings import SpaceSettings
 
     raw = {a: np.round(pts[:, i] / 0.001).astype(np.int64) for i, a in enumerate("xyz")}
     mem = MemoryStore(raw, (0.001,) * 3, (0.0,) * 3, (0.0, 0.0, 0.0))
     p = SpaceSettings(ceilings=ceilings)
     grid = Grid.for_store(mem, Frame(0.0, (0.0, 0.0, 0.0)), p.bin_width, p.z_bin)
-    return _parse_part(mem, 0.0, grid, p, 0, np.array([[-1, int(4.0 / ZB)]]), np.array([BAND])).n_spaces
+    return parse_part(mem, 0.0, grid, p, 0, np.array([[-1, int(4.0 / ZB)]]), np.array([BAND])).n_spaces
 
 
 def test_rooms_under_two_ceilings_parted_by_glass_are_two_spaces_in_the_refinement():

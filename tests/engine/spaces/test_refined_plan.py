@@ -5,8 +5,9 @@ import numpy as np
 
 from engine.spaces.alignment import Frame
 from engine.spaces.merging import Edge
-from engine.spaces.parse import _RefinedPlan
-from engine.spaces.refine import Part, Refinement
+from engine.spaces.part import Part
+from engine.spaces.refine import Refinement
+from engine.spaces.refined_plan import RefinedPlan
 from engine.spaces.slicing import Box
 
 BW = 0.01
@@ -17,7 +18,7 @@ def _box(u0, u1, v0, v1, count=1000):
     return Box(0, int(u0 / BW), int(u1 / BW), int(v0 / BW), int(v1 / BW), final=True, count=count)
 
 
-def _plan() -> _RefinedPlan:
+def _plan() -> RefinedPlan:
     """A hallway (u 0-2, v 0-13, not refined) beside a space (u 2-7) that refinement cut into a room (v 0-8)
     and a second room (v 8-13): the one building face between them (u = 2) borders both."""
     cells = [_box(0, 2, 0, 13), _box(2, 7, 0, 13)]
@@ -26,7 +27,7 @@ def _plan() -> _RefinedPlan:
     part = Part(0.0, cells=[_box(2, 7, 0, 8), _box(2, 7, 8, 13)], labels=np.array([0, 1]),
                 edges=[Edge(0, 1, 0, 1, 800, (200, 700), divider={"kind": "peak-gap-peak"})])
     ref = Refinement(1, 0, parts=[part], points=2000)
-    return _RefinedPlan.build(cells, edges, labels, [ref], FRAME, BW)
+    return RefinedPlan.build(cells, edges, labels, [ref], FRAME, BW)
 
 
 def test_a_building_face_beside_a_refined_space_is_cut_where_the_space_beyond_changes():
@@ -53,7 +54,6 @@ def test_regroup_joins_spaces_and_renumbers():
     assert 0 not in plan.sub_of and plan.sub_of[1][0] == 0
 
 
-
 def test_the_pieces_of_a_face_between_two_refined_spaces_are_listed_for_testing_again():
     """Two spaces (u 0-5 and u 5-10), each cut by its refinement at v = 8 m: the building face u = 5 between
     them had a divider found on its whole length (a wall between the two rooms below v = 8 m); each piece is
@@ -68,7 +68,7 @@ def test_the_pieces_of_a_face_between_two_refined_spaces_are_listed_for_testing_
                     edges=[Edge(0, 1, 0, 1, 800, (u0 * 100, u1 * 100), divider={"kind": "peak-gap-peak"})])
         return Refinement(space, 0, parts=[part], points=2000)
 
-    plan = _RefinedPlan.build(cells, edges, labels, [refinement(0, 0, 5), refinement(1, 5, 10)], FRAME, BW)
+    plan = RefinedPlan.build(cells, edges, labels, [refinement(0, 0, 5), refinement(1, 5, 10)], FRAME, BW)
     assert plan.n_spaces == 5
     got = [plan.edges[i] for i in plan.pieces]
     assert [(e.a, e.b) for e in got] == [(0, 1), (0, 1)]

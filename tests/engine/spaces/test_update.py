@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.spaces.alignment import Frame
-from engine.spaces.parse import Face, SpaceParse
+from engine.spaces.document import Face, SpaceParse
 from engine.spaces.update import UpdateSettings, face_coverage, merge_mapping, separated_pairs, update_spaces
 from tiles.builder import StoreBuilder
 from tiles.groundtruth import gt_dimensions
