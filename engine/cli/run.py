@@ -44,11 +44,18 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-crf", action="store_true", help="keep every detection proposal (skip the CRF)")
     p.add_argument("--no-update", action="store_true", help="do not update the spaces from detected walls")
     p.add_argument("--no-points", action="store_true", help="do not write points.laz")
+    p.add_argument("--no-ifc", action="store_true", help="do not write building.ifc (buildingparser.outputs.ifc)")
+    p.add_argument("--no-viewer", action="store_true",
+                   help="do not write viewer.html, the 3D view (buildingparser.outputs.viewer)")
     add_storage_options(p)
     add_cluster_options(p)
 
 
 def run(args: argparse.Namespace) -> int:
+    import contextlib
+
+    import dask
+
     from engine.cli.logs import run_log
     from engine.pipeline.cluster import check_reachable, cluster_client
     from engine.pipeline.results import summary_lines
@@ -62,6 +69,9 @@ def run(args: argparse.Namespace) -> int:
         logger.debug("run %s --out %s: %s", args.input, args.out, options)
         with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
             check_reachable(client, args.input, args.out, args.store)
-            metrics = run_pipeline(args.input, args.out, client=client, options=options)
+            off = {f"buildingparser.outputs.{k}": False for k, no in (("ifc", args.no_ifc), ("viewer", args.no_viewer))
+                   if no}
+            with dask.config.set(off) if off else contextlib.nullcontext():
+                metrics = run_pipeline(args.input, args.out, client=client, options=options)
     print("\n".join(summary_lines(metrics, args.out)))
     return 0

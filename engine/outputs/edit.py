@@ -3,7 +3,7 @@
 An edit reads a finished run's folder (``spaces.geojson``, ``elements.json``,
 ``points.laz``, ``metrics.json``) and writes the edited run into another folder
 (never the original, unless asked): the spaces layer, the elements, a new
-``points.laz`` variant, the statistics, the floor plan and the report, with an
+``points.laz`` variant, the statistics, the floor plan, ``building.ifc`` and the report, with an
 ``edit`` record in ``metrics.json``.
 
 Merge ``A B ...`` (spaces of one storey, each touching another of them):
@@ -287,6 +287,12 @@ def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: i
         json.dump(elements, f, indent=1)
     draw_plan(layer, elements, os.path.join(staging, "floorplan.png"), os.path.join(staging, "floorplan.svg"),
               crs_known=bool(layer.get("crs") or layer.get("crs_wkt")))
+    from tiles.config import setting
+
+    if setting("outputs.ifc"):
+        from engine.outputs.ifc import write_ifc
+
+        write_ifc(staging)
     metrics = _edited_metrics(metrics, record, run, len(layer["features"]))
     with open(os.path.join(staging, "metrics.json"), "w") as f:
         json.dump(metrics, f, indent=1)

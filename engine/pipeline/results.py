@@ -116,8 +116,9 @@ def compute_metrics(store: TileStore, input: str, parsed, final, proposals, elem
 
 
 def write_plan_outputs(store: TileStore, final, elements, staging: str, client) -> dict[str, Any]:
-    """``spaces.geojson``, ``elements.json`` and the floor plan (``floorplan.png``, ``floorplan.svg``) into
-    ``staging``; returns the space statistics."""
+    """``spaces.geojson``, ``elements.json``, the floor plan (``floorplan.png``, ``floorplan.svg``), the
+    building model (``building.ifc``) and the 3D view (``viewer.html``) into ``staging``; returns the space
+    statistics."""
     from engine.outputs.geojson import spaces_feature_collection
     from engine.outputs.labels import element_records, write_elements_json
     from engine.outputs.plan import draw_plan
@@ -133,6 +134,10 @@ def write_plan_outputs(store: TileStore, final, elements, staging: str, client) 
     write_elements_json(elements, os.path.join(staging, "elements.json"))
     draw_plan(layer, records, os.path.join(staging, "floorplan.png"), os.path.join(staging, "floorplan.svg"),
               crs_known=bool(store.meta.crs))
+    if setting("outputs.ifc"):
+        from engine.outputs.ifc import write_ifc
+
+        write_ifc(staging)
     if setting("outputs.viewer"):
         from engine.outputs.viewer import space_counts_from_layer, viewer_points, write_viewer
 
@@ -199,8 +204,11 @@ def summary_lines(metrics: dict[str, Any], out: str) -> list[str]:
                      f"{pct(d['map_before_crf'])}{ranked}; point mIoU {pct(d['miou'])}")
         lines.append("AP per class: " + ", ".join(f"{k} {pct(v)}" for k, v in d["ap"].items()))
     lines.append("elements: " + (", ".join(f"{k} {v}" for k, v in metrics.get("elements", {}).items()) or "none"))
-    written = [n for n in ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "viewer.html",
-                           "elements.json", "metrics.json", "report.html") if n != "points.laz" or metrics.get("points_written", True)]
+    names = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "building.ifc", "viewer.html",
+             "elements.json", "metrics.json", "report.html")
+    off = {"points.laz": not metrics.get("points_written", True), "building.ifc": not setting("outputs.ifc"),
+           "viewer.html": not setting("outputs.viewer")}
+    written = [n for n in names if not off.get(n)]
     for name in written:
         lines.append(f"{name}: {paths.join(out, name)}")
     return lines

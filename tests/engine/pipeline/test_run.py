@@ -19,8 +19,8 @@ from tests.engine.pipeline.logged import logged
 from tiles.store import open_store
 from tiles.tasks import TaskFailures
 
-OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "viewer.html", "elements.json",
-           "metrics.json", "report.html")
+OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "building.ifc", "viewer.html",
+           "elements.json", "metrics.json", "report.html")
 
 
 @pytest.fixture(scope="module")
