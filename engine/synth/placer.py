@@ -18,9 +18,9 @@ import shapely
 from shapely.geometry import Polygon
 
 from engine.synth.building import Element, Space, Wall
+from engine.synth.faces import edge_openings, footprint_edges
 from engine.synth.geometry import Box
 from engine.synth.pieces import Part
-from engine.synth.structure import edge_openings, footprint_edges
 
 
 class Placer:

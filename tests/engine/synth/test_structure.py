@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 from shapely.geometry import Point, Polygon
 
+from engine.synth.faces import edge_openings, footprint_edges
 from engine.synth.geometry import Box, Rect
-from engine.synth.structure import edge_openings, footprint_edges
 
 
 def test_wall_faces_have_a_hole_per_opening(building):
