@@ -359,23 +359,7 @@ class Building:
                                           [float(v) for v in e.size], float(fr.angle(e.yaw + s.registration_yaw))))
         doc = make_doc(spaces, elements)
         for d, s in zip(doc["spaces"], self.spaces):
-            d["area"] = round(s.area, 4)
-            d["neighbours"] = sorted({o for oid in s.doors for o in self._door_spaces(oid) if o != s.id})
-            d["doors"] = list(s.doors)
-            d["windows"] = list(s.windows)
-            d["walls"] = list(s.walls)
-            d["scanners"] = [[float(v) for v in p] for p in fr.xyz(s.scanners)]
-            if counts is not None:
-                d["points"] = int(counts["spaces"].get(s.id, 0))
-            if hard:
-                d["scanned"] = bool(s.scanned)
-                d["axis_deg"] = math.degrees(s.axis)
-                if s.registration is not None:
-                    tx, ty, tz, angle, px, py = s.registration
-                    c, sn = math.cos(fr.yaw), math.sin(fr.yaw)
-                    d["registration"] = {"offset": [c * tx - sn * ty, sn * tx + c * ty, tz],
-                                         "yaw_deg": math.degrees(angle),
-                                         "pivot": [float(v) for v in fr.xy(np.array([[px, py]]))[0]]}
+            self._space_doc(d, s, counts, hard)
         for d, e in zip(doc["elements"], self.elements):
             if e.info:
                 d.update(e.info)
@@ -388,6 +372,27 @@ class Building:
         doc["building"] = dict(self.params, yaw_deg=math.degrees(fr.yaw), offset=list(fr.offset),
                                floor_area_m2=round(self.floor_area, 3))
         return doc
+
+    def _space_doc(self, d: dict[str, Any], s: Space, counts: dict[str, dict[int, int]] | None, hard: bool) -> None:
+        """Add a space's own fields (area, openings, neighbours, walls, scanners, points, difficulties) to ``d``."""
+        fr = self.frame
+        d["area"] = round(s.area, 4)
+        d["neighbours"] = sorted({o for oid in s.doors for o in self._door_spaces(oid) if o != s.id})
+        d["doors"] = list(s.doors)
+        d["windows"] = list(s.windows)
+        d["walls"] = list(s.walls)
+        d["scanners"] = [[float(v) for v in p] for p in fr.xyz(s.scanners)]
+        if counts is not None:
+            d["points"] = int(counts["spaces"].get(s.id, 0))
+        if hard:
+            d["scanned"] = bool(s.scanned)
+            d["axis_deg"] = math.degrees(s.axis)
+            if s.registration is not None:
+                tx, ty, tz, angle, px, py = s.registration
+                c, sn = math.cos(fr.yaw), math.sin(fr.yaw)
+                d["registration"] = {"offset": [c * tx - sn * ty, sn * tx + c * ty, tz],
+                                     "yaw_deg": math.degrees(angle),
+                                     "pivot": [float(v) for v in fr.xy(np.array([[px, py]]))[0]]}
 
     def _door_spaces(self, opening_id: int) -> list[int]:
         o = self.openings[opening_id]

@@ -1,12 +1,9 @@
-"""Furniture and clutter: realistic pieces made of boxes, placed per room type.
+"""Furniture and clutter per room type: the recipes that furnish one space.
 
-A piece is a list of part boxes in its own frame (origin at the centre of its
-footprint on the floor, x across, y towards its back, z up), turned by a yaw and
-set down in the space.  Tables have a top and legs (the floor shows between
-them), chairs a seat, a back and a base, bookcases sides, shelves and books,
-sofas a base that hides the floor, boards hang on walls.  Placement keeps
-pieces inside the clear footprint, off each other (3-D boxes), out of door
-swings and clearances, and keeps tall pieces away from windows.
+Each recipe draws pieces (:mod:`engine.synth.pieces`) and sets them down
+with a :class:`engine.synth.placer.Placer`, which keeps them inside the clear
+footprint, off each other (3-D boxes), out of door swings and clearances, and
+keeps tall pieces away from windows.
 
 Room types and what they hold (S3DIS room types): ``office`` (desks with
 chairs, bookcases, a board), ``conferenceRoom`` (a long table ringed with
@@ -22,250 +19,12 @@ import math
 
 import numpy as np
 import shapely
-from shapely.geometry import Polygon
 
 from engine.synth import colours as C
-from engine.synth.building import Element, Opening, Space, Wall
-from engine.synth.geometry import Box
-from engine.synth.structure import edge_openings, footprint_edges
-
-Part = tuple[float, float, float, float, float, float, tuple]  # cx, cy, cz, sx, sy, sz, rgb
-
-
-# -- pieces (local frames) -----------------------------------------------------------------
-def table(rng: np.random.Generator, w: float, d: float, h: float, rgb: tuple) -> list[Part]:
-    """A table or desk ``w`` x ``d``, top at ``h``: a top on four legs, or on side panels with a modesty panel."""
-    top = 0.03
-    parts: list[Part] = [(0, 0, h - top / 2, w, d, top, rgb)]
-    if rng.random() < 0.6:
-        leg = C.METAL if rng.random() < 0.5 else rgb
-        for sx in (-1, 1):
-            for sy in (-1, 1):
-                parts.append((sx * (w / 2 - 0.05), sy * (d / 2 - 0.05), (h - top) / 2, 0.05, 0.05, h - top, leg))
-    else:  # desk with side panels and a modesty panel
-        for sx in (-1, 1):
-            parts.append((sx * (w / 2 - 0.015), 0, (h - top) / 2, 0.03, d, h - top, rgb))
-        parts.append((0, d / 2 - 0.06, h - top - 0.25, w - 0.06, 0.02, 0.35, rgb))
-    return parts
-
-
-def chair(rng: np.random.Generator, rgb: tuple) -> list[Part]:
-    """An office chair (post and star base, maybe armrests) or a four-legged chair; back towards +y."""
-    seat_z = rng.uniform(0.42, 0.5)
-    parts: list[Part] = [(0, 0, seat_z, 0.46, 0.46, 0.07, rgb),
-                         (0, 0.2, seat_z + 0.04 + 0.23, 0.44, 0.06, 0.46, rgb)]
-    if rng.random() < 0.6:  # office chair: post and star base
-        parts += [(0, 0, (0.07 + seat_z - 0.035) / 2, 0.05, 0.05, seat_z - 0.035 - 0.07, C.METAL),
-                  (0, 0, 0.035, 0.56, 0.05, 0.07, C.METAL), (0, 0, 0.035, 0.05, 0.56, 0.07, C.METAL)]
-        if rng.random() < 0.5:
-            for sx in (-1, 1):
-                parts.append((sx * 0.25, -0.02, seat_z + 0.22, 0.05, 0.3, 0.03, C.METAL))
-                parts.append((sx * 0.25, 0.05, seat_z + 0.1, 0.03, 0.03, 0.2, C.METAL))
-    else:  # four legs
-        lz = seat_z - 0.035
-        for sx in (-1, 1):
-            for sy in (-1, 1):
-                parts.append((sx * 0.2, sy * 0.2, lz / 2, 0.03, 0.03, lz, C.METAL))
-    return parts
-
-
-def sofa(rng: np.random.Generator, w: float, rgb: tuple) -> list[Part]:
-    """A sofa ``w`` wide: a base on the floor (hiding it), cushions, back and arms."""
-    d, h = rng.uniform(0.8, 0.95), rng.uniform(0.75, 0.9)
-    return [(0, 0, 0.21, w, d, 0.42, rgb),
-            (0, -0.08, 0.47, w - 0.36, d - 0.25, 0.1, rgb),
-            (0, d / 2 - 0.1, 0.42 + (h - 0.42) / 2, w, 0.2, h - 0.42, rgb),
-            (-(w / 2 - 0.09), 0, 0.52, 0.18, d, 0.2, rgb),
-            (w / 2 - 0.09, 0, 0.52, 0.18, d, 0.2, rgb)]
-
-
-def bookcase(rng: np.random.Generator, w: float, d: float, h: float, rgb: tuple) -> list[Part]:
-    """Open shelves with books of random widths and colours, or a closed cabinet; back towards +y."""
-    parts: list[Part] = []
-    for sx in (-1, 1):
-        parts.append((sx * (w / 2 - 0.01), 0, h / 2, 0.02, d, h, rgb))
-    parts.append((0, d / 2 - 0.0075, h / 2, w - 0.04, 0.015, h, rgb))
-    parts.append((0, -0.0075, h - 0.01, w - 0.04, d - 0.015, 0.02, rgb))
-    parts.append((0, -0.0075, 0.04, w - 0.04, d - 0.015, 0.08, rgb))
-    if rng.random() < 0.25:  # closed cabinet
-        parts.append((0, -d / 2 + 0.01, h / 2 + 0.04, w - 0.04, 0.02, h - 0.1, rgb))
-        return parts
-    n = max(1, round((h - 0.1) / 0.36))
-    levels = np.linspace(0.08, h - 0.02, n + 1)
-    for z in levels[1:-1]:
-        parts.append((0, -0.0075, z, w - 0.04, d - 0.04, 0.02, rgb))
-    for a, b in zip(levels[:-1], levels[1:]):
-        room = b - a - 0.03
-        if room < 0.15 or rng.random() < 0.3:
-            continue
-        x = -w / 2 + 0.03
-        while x < w / 2 - 0.1:
-            bw = rng.uniform(0.08, 0.35)
-            if x + bw > w / 2 - 0.03:
-                break
-            if rng.random() < 0.8:
-                bh = rng.uniform(0.6, 0.95) * room
-                parts.append((x + bw / 2, 0.01, a + 0.01 + bh / 2, bw, d - 0.08, bh, C.vivid(rng)))
-            x += bw + 0.005
-    return parts
-
-
-def board(rng: np.random.Generator, w: float, h: float, bottom: float, rgb: tuple) -> list[Part]:
-    """A thin board on a wall (back at +y) from ``bottom`` up, with a pen tray."""
-    return [(0, 0.05 - 0.01, bottom + h / 2, w, 0.02, h, rgb),
-            (0, 0.05 - 0.04, bottom - 0.01, 0.6 * w, 0.06, 0.02, C.METAL)]
-
-
-def clutter(rng: np.random.Generator, kind: str, z: float = 0.0) -> tuple[list[Part], tuple[float, float]]:
-    """A clutter object standing at height ``z``; also its footprint (w, d)."""
-    rgb = C.vivid(rng)
-    if kind == "monitor":
-        sw = rng.uniform(0.45, 0.65)
-        return [(0, 0.02, z + 0.01, 0.22, 0.18, 0.02, C.METAL), (0, 0.05, z + 0.08, 0.05, 0.04, 0.12, C.METAL),
-                (0, 0.03, z + 0.14 + 0.17, sw, 0.04, 0.34, (25, 25, 28))], (sw, 0.2)
-    if kind == "laptop":
-        return [(0, 0, z + 0.01, 0.33, 0.23, 0.02, C.METAL), (0, 0.11, z + 0.12, 0.33, 0.01, 0.22, C.METAL)], (0.33, 0.24)
-    if kind == "papers":
-        w, d, h = rng.uniform(0.2, 0.35), rng.uniform(0.2, 0.3), rng.uniform(0.02, 0.15)
-        return [(0, 0, z + h / 2, w, d, h, C.pick(rng, [(235, 235, 230), (220, 215, 190)]))], (w, d)
-    if kind == "bin":
-        return [(0, 0, z + 0.2, 0.3, 0.3, 0.4, rgb)], (0.3, 0.3)
-    if kind == "box":
-        s = rng.uniform(0.3, 0.6, 3)
-        parts = [(0, 0, z + s[2] / 2, s[0], s[1], s[2], C.pick(rng, [(170, 130, 85), (190, 150, 100)]))]
-        if rng.random() < 0.4:
-            t = s * rng.uniform(0.6, 0.95, 3)
-            parts.append((0, 0, z + s[2] + t[2] / 2, t[0], t[1], t[2], C.pick(rng, [(170, 130, 85)])))
-        return parts, (s[0], s[1])
-    if kind == "plant":
-        p = rng.uniform(0.3, 0.45)
-        f = rng.uniform(0.5, 0.8)
-        fh = rng.uniform(0.6, 1.2)
-        return [(0, 0, z + p / 2, p, p, p, rgb), (0, 0, z + p + fh / 2, f, f, fh, (50, 100, 45))], (f, f)
-    if kind == "printer":
-        return [(0, 0, z + 0.4, 0.5, 0.45, 0.35, (200, 200, 198)), (0, 0, z + 0.11, 0.45, 0.4, 0.22, C.METAL)], (0.5, 0.45)
-    if kind == "cooler":
-        return [(0, 0, z + 0.5, 0.32, 0.32, 1.0, (220, 220, 225)), (0, 0, z + 1.15, 0.26, 0.26, 0.3, (120, 160, 210))], \
-            (0.32, 0.32)
-    if kind == "toilet":
-        return [(0, -0.05, z + 0.2, 0.38, 0.55, 0.4, (240, 240, 240)),
-                (0, 0.22, z + 0.6, 0.4, 0.18, 0.4, (240, 240, 240))], (0.4, 0.7)
-    raise ValueError(kind)
-
-
-# -- placement -------------------------------------------------------------------------------
-class Placer:
-    """Free space of one room: clear footprint, wall edges with their openings, occupied 3-D boxes."""
-
-    def __init__(self, rng: np.random.Generator, space: Space, walls: list[Wall], style: dict):
-        self.rng, self.space, self.style = rng, space, style
-        self.hard = None
-        self.poly = Polygon(space.footprint)
-        shapely.prepare(self.poly)
-        lo, hi = space.footprint.min(0), space.footprint.max(0)
-        self.rectangular = abs((hi - lo).prod() - self.poly.area) < 1e-6
-        self.occupied = np.empty((0, 6))
-        self.edges = []
-        z0 = space.z0
-        for a, b in footprint_edges(space):
-            e = b - a
-            length = float(np.hypot(*e))
-            self.edges.append({"a": a, "e": e / length, "n": np.array([-e[1], e[0]]) / length, "len": length,
-                               "openings": [(s0, s1, o) for s0, s1, o in edge_openings(space, walls, a, b)]})
-        # keep doorways clear on this side (and the swing of leaves turning into this room)
-        for ed in self.edges:
-            for s0, s1, o in ed["openings"]:
-                if o.kind == "door":
-                    reach = 1.1 if o.leaf != "open" else (s1 - s0) / o.leaves + 0.3
-                    self._block_strip(ed, s0 - 0.25, s1 + 0.25, max(reach, 1.0), z0, space.z1)
-                else:  # only tall things (bookcases, not chairs) are kept off windows
-                    self._block_strip(ed, s0 - 0.05, s1 + 0.05, 0.45, o.z0 + 0.2, o.z1)
-        for e in space.elements:  # columns, beams, partial walls, lights, door leaves and casings
-            for b in e.prims:
-                if isinstance(b, Box):
-                    self.occupy(b.corners())
-
-    def _block_strip(self, ed, s0, s1, depth, z0, z1):
-        a, e, n = ed["a"], ed["e"], ed["n"]
-        pts = np.array([a + e * s0, a + e * s1, a + e * s0 + n * depth, a + e * s1 + n * depth])
-        self.occupied = np.vstack([self.occupied, np.r_[pts.min(0), z0, pts.max(0), z1]])
-
-    def occupy(self, corners: np.ndarray) -> None:
-        self.occupied = np.vstack([self.occupied, np.r_[corners.min(0), corners.max(0)]])
-
-    def fits(self, parts: list[Box], margin: float = 0.02) -> bool:
-        corners = np.concatenate([b.corners() for b in parts])
-        lo, hi = corners.min(0) + margin, corners.max(0) - margin
-        o = self.occupied
-        if len(o) and np.any((lo[0] < o[:, 3]) & (hi[0] > o[:, 0]) & (lo[1] < o[:, 4]) & (hi[1] > o[:, 1])
-                             & (lo[2] < o[:, 5]) & (hi[2] > o[:, 2])):
-            return False
-        xy = corners[:, :2]
-        if self.rectangular:
-            flo, fhi = self.space.footprint.min(0), self.space.footprint.max(0)
-            return bool(np.all(xy >= flo - 1e-9) and np.all(xy <= fhi + 1e-9))
-        hull = shapely.convex_hull(shapely.multipoints(xy))
-        return bool(self.poly.contains(hull))
-
-    def build(self, parts: list[Part], xy, yaw: float, z: float = None) -> list[Box]:
-        z = self.space.z0 if z is None else z
-        c, s = math.cos(yaw), math.sin(yaw)
-        out = []
-        for cx, cy, cz, sx, sy, sz, rgb in parts:
-            wx = xy[0] + c * cx - s * cy
-            wy = xy[1] + s * cx + c * cy
-            out.append(Box(np.array([wx, wy, z + cz]), np.array([sx, sy, sz], float), yaw, tuple(rgb)))
-        return out
-
-    def put(self, cls: str, parts: list[Part], xy, yaw: float, z: float = None, *, margin: float = 0.02,
-            info: dict | None = None) -> Element | None:
-        boxes = self.build(parts, xy, yaw, z)
-        if not self.fits(boxes, margin):
-            return None
-        for b in boxes:
-            self.occupy(b.corners())
-        el = Element(-1, cls, self.space.id, boxes, yaw=yaw, info=info or {})
-        self.space.elements.append(el)
-        return el
-
-    # wall positions
-    def wall_spot(self, width: float, depth: float, height: float, gap: float = 0.02, bottom: float = 0.0,
-                  edge: int | None = None):
-        """A random spot against a wall: centre xy and yaw facing into the room (local +y to the wall)."""
-        choices = [i for i, ed in enumerate(self.edges) if ed["len"] >= width + 0.1] if edge is None else [edge]
-        if not choices:
-            return None
-        lens = np.array([self.edges[i]["len"] for i in choices])
-        i = choices[int(self.rng.choice(len(choices), p=lens / lens.sum()))]
-        ed = self.edges[i]
-        s = self.rng.uniform(0.05, ed["len"] - width - 0.05) if ed["len"] - width > 0.1 else (ed["len"] - width) / 2
-        for s0, s1, o in ed["openings"]:
-            if s < s1 + 0.05 and s + width > s0 - 0.05 and (o.kind == "door" or bottom < o.z1 - self.space.z0
-                                                          and bottom + height > o.z0 - self.space.z0):
-                return None
-        n = ed["n"]
-        xy = ed["a"] + ed["e"] * (s + width / 2) + n * (gap + depth / 2)
-        return xy, math.atan2(n[0], -n[1]), i
-
-    def against_wall(self, cls: str, make, width: float, depth: float, height: float, *, tries: int = 12,
-                     bottom: float = 0.0, gap: float = 0.02, edge: int | None = None, info=None) -> Element | None:
-        for _ in range(tries):
-            spot = self.wall_spot(width, depth, height, gap, bottom, edge)
-            if spot is None:
-                continue
-            el = self.put(cls, make(), spot[0], spot[1], info=info)
-            if el is not None:
-                return el
-        return None
-
-    def free_spot(self, tries: int, place) -> Element | None:
-        lo, hi = self.space.footprint.min(0), self.space.footprint.max(0)
-        for _ in range(tries):
-            xy = self.rng.uniform(lo, hi)
-            el = place(xy)
-            if el is not None:
-                return el
-        return None
+from engine.synth.building import Opening, Space, Wall
+from engine.synth.hard import furniture as hard_furniture
+from engine.synth.pieces import board, bookcase, chair, clutter, sofa, table
+from engine.synth.placer import Placer
 
 
 def furnish(rng: np.random.Generator, space: Space, walls: list[Wall], openings: list[Opening], style: dict,
@@ -280,8 +39,6 @@ def furnish(rng: np.random.Generator, space: Space, walls: list[Wall], openings:
     p = Placer(rng, space, walls, style)
     p.hard = hard
     if hard is not None:
-        from engine.synth.hard import furniture as hard_furniture
-
         hard_furniture.before(p, walls, hard)
     _radiators(p, walls)
     {"office": _office, "conferenceRoom": _conference, "hallway": _hallway, "lobby": _lobby,
@@ -569,9 +326,7 @@ def _openspace(p: Placer) -> None:
             w, d = rng.uniform(1.2, 1.6), rng.uniform(0.7, 0.8)
             ax = np.array([-math.sin(yaw), math.cos(yaw)])
             if pods:  # a cubicle pod: low partitions between and beside the two desks
-                from engine.synth.hard.furniture import cubicle
-
-                cubicle(p, np.array([x, y]), yaw, w, d)
+                hard_furniture.cubicle(p, np.array([x, y]), yaw, w, d)
             for sgn in (1, -1):
                 xy = np.array([x, y]) + ax * sgn * (d / 2 + (0.04 if pods else 0.01))
                 _desk_with_chair(p, free_xy=xy, yaw=yaw + (0 if sgn < 0 else math.pi))

@@ -137,6 +137,11 @@ def wall_frame(p0, p1) -> tuple[np.ndarray, np.ndarray, float, float]:
     return d, np.array([-d[1], d[0]]), length, math.atan2(d[1], d[0])
 
 
+def v3(xy, z: float = 0.0) -> np.ndarray:
+    """A 3-D point or vector from a 2-D one and a height."""
+    return np.array([xy[0], xy[1], z], float)
+
+
 def at(p0, d, n, s: float, t: float, z: float) -> np.ndarray:
     """The 3-D point ``s`` along ``d`` and ``t`` along ``n`` from ``p0`` (2-D) at height ``z``."""
     xy = np.asarray(p0, float) + s * np.asarray(d, float) + t * np.asarray(n, float)

@@ -74,6 +74,29 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
     ``outline`` (length, depth) fixes the rectangle (upper floors of a building): the
     band depths drawn are then scaled to fill it.
     """
+    length, depth, rows, halls = _bands(rng, area, outline)
+    drafts: list[Draft] = []
+    blocked: dict[int, list[tuple[float, float]]] = {i: [] for i in range(len(rows))}
+    hall_x0 = {i: 0.0 for i in range(len(halls))}
+    if lobby and length >= 20:
+        hall_x0[0] = _lobby(rng, length, rows, halls, drafts, blocked)
+    _cross_hallways(rng, length, rows, halls, drafts, blocked)
+    _hallways(rng, length, halls, hall_x0, drafts)
+    # rows of rooms between the blocked intervals
+    for i, r in enumerate(rows):
+        for a, b in _free_intervals(0.0, length, blocked[i]):
+            for x0, x1 in _split_run(rng, a, b):
+                drafts.append(Draft("room", [(x0, r.y0, x1, r.y1)], row=i))
+
+    _reshape(rng, drafts, rows)
+    if target is not None:
+        _adjust_count(rng, drafts, target)
+    return FloorLayout(length, depth, drafts, rows)
+
+
+def _bands(rng: np.random.Generator, area: float, outline: tuple[float, float] | None
+           ) -> tuple[float, float, list[Row], list[tuple[float, float]]]:
+    """Length and depth of the floor, its rows of rooms and its hallways (y extents), band by band."""
     if outline is not None:
         area = outline[0] * outline[1]
     bands = max(1, round(math.sqrt(area / 560.0)))
@@ -102,24 +125,30 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
             rows.append(Row(y0, y1, 1 if above_is_hall else -1))
         y += d
     depth = round(y, 3) if outline is None else outline[1]
-    drafts: list[Draft] = []
-    blocked: dict[int, list[tuple[float, float]]] = {i: [] for i in range(len(rows))}
-    hall_x0 = {i: 0.0 for i in range(len(halls))}
+    return length, depth, rows, halls
 
-    # lobby: the first metres of band 0, its hallway and the rows beside it while it stays within 15 m deep
-    if lobby and length >= 20:
-        lb = round(float(rng.uniform(6.0, min(12.0, length / 3))), 2)
-        band_rows = [i for i, r in enumerate(rows) if _band_of(r, halls) == 0]
-        y0, y1 = halls[0]
-        for i in sorted(band_rows, key=lambda i: rows[i].y1 - rows[i].y0):
-            r = rows[i]
-            if max(y1, r.y1) - min(y0, r.y0) <= 15.0:
-                y0, y1 = min(y0, r.y0), max(y1, r.y1)
-                blocked[i].append((0.0, lb))
-        drafts.append(Draft("lobby", [(0.0, y0, lb, y1)], simple=False))
-        hall_x0[0] = lb
 
-    # cross hallways between neighbouring bands
+def _lobby(rng: np.random.Generator, length: float, rows: list[Row], halls: list[tuple[float, float]],
+           drafts: list[Draft], blocked: dict[int, list[tuple[float, float]]]) -> float:
+    """The lobby: the first metres of band 0, its hallway and the rows beside it while it stays within 15 m deep.
+
+    Returns where band 0's hallway starts (the lobby's end).
+    """
+    lb = round(float(rng.uniform(6.0, min(12.0, length / 3))), 2)
+    band_rows = [i for i, r in enumerate(rows) if _band_of(r, halls) == 0]
+    y0, y1 = halls[0]
+    for i in sorted(band_rows, key=lambda i: rows[i].y1 - rows[i].y0):
+        r = rows[i]
+        if max(y1, r.y1) - min(y0, r.y0) <= 15.0:
+            y0, y1 = min(y0, r.y0), max(y1, r.y1)
+            blocked[i].append((0.0, lb))
+    drafts.append(Draft("lobby", [(0.0, y0, lb, y1)], simple=False))
+    return lb
+
+
+def _cross_hallways(rng: np.random.Generator, length: float, rows: list[Row], halls: list[tuple[float, float]],
+                    drafts: list[Draft], blocked: dict[int, list[tuple[float, float]]]) -> None:
+    """Cross hallways between neighbouring bands."""
     for b in range(len(halls) - 1):
         lo_hall, hi_hall = halls[b], halls[b + 1]
         between = [i for i, r in enumerate(rows) if r.y0 >= lo_hall[1] - 1e-6 and r.y1 <= hi_hall[0] + 1e-6]
@@ -133,7 +162,10 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
             for i in between:
                 blocked[i].append((x0, x0 + width))
 
-    # hallways, cut by fire-door walls when long
+
+def _hallways(rng: np.random.Generator, length: float, halls: list[tuple[float, float]], hall_x0: dict[int, float],
+              drafts: list[Draft]) -> None:
+    """The hallway of each band, cut by fire-door walls when long."""
     for b, (y0, y1) in enumerate(halls):
         x0 = hall_x0[b]
         run = length - x0
@@ -143,17 +175,6 @@ def floor_layout(rng: np.random.Generator, area: float, *, target: int | None = 
             cuts[1:-1] += rng.uniform(-3, 3, n_seg - 1)
         for a, c in zip(cuts[:-1], cuts[1:]):
             drafts.append(Draft("hallway", [(round(float(a), 3), y0, round(float(c), 3), y1)], simple=False))
-
-    # rows of rooms between the blocked intervals
-    for i, r in enumerate(rows):
-        for a, b in _free_intervals(0.0, length, blocked[i]):
-            for x0, x1 in _split_run(rng, a, b):
-                drafts.append(Draft("room", [(x0, r.y0, x1, r.y1)], row=i))
-
-    _reshape(rng, drafts, rows)
-    if target is not None:
-        _adjust_count(rng, drafts, target)
-    return FloorLayout(length, depth, drafts, rows)
 
 
 def _band_of(row: Row, halls: list[tuple[float, float]]) -> int:

@@ -30,7 +30,7 @@ from shapely.geometry import Polygon
 from engine.synth.building import Building, Frame, PartSpec, Space
 from engine.synth.colours import shade
 from engine.synth.geometry import Box, Poly, Rect
-from engine.synth.plan import S_SCAN, rng_for
+from engine.synth.streams import S_SCAN, rng_for
 
 VOXEL = 0.5
 PAIR_CHUNK = 2_000_000

@@ -1,7 +1,7 @@
 """Floors of general polygons: walls where spaces meet, at any angle, and spaces planned in their own frame.
 
 The clean generator's floors are rectangles cut into axis-aligned cells, and
-:func:`engine.synth.plan._walls` finds walls on the cells' grid lines exactly.
+:func:`engine.synth.walls.grid_walls` finds walls on the cells' grid lines exactly.
 Non-rectangular floors (a wing at an angle, chamfered and rounded corners,
 slanted or curved walls, a stair tower) describe each space by its centre-line
 polygon instead, and :func:`walls_from_polygons` finds the walls the same way

@@ -1,6 +1,6 @@
 """Furniture of the difficulties (:mod:`engine.synth.hard.hardness`): lined walls, bottlenecks, cubicles, piles of boxes.
 
-Placed by the same :class:`engine.synth.furniture.Placer` as the ordinary
+Placed by the same :class:`engine.synth.placer.Placer` as the ordinary
 furniture (inside the footprint, off each other, out of doorways), in the
 space's own frame, but with the difficulty's own random stream (the placer's
 stream is swapped for the duration) so that the ordinary pieces draw the same
@@ -28,8 +28,8 @@ import numpy as np
 
 from engine.synth import colours as C
 from engine.synth.building import Wall
-from engine.synth.furniture import Placer
 from engine.synth.hard.hardness import HardContext
+from engine.synth.placer import Placer
 
 
 @contextmanager

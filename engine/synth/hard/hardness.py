@@ -17,7 +17,7 @@ name               what it adds (level 1), and where
 ``glass``          glass partitions: a quarter of the room-hallway and room-room walls become glazed
                    partitions 0.08-0.12 m thick (sparse glass, 6 % of the density; mullions, rails and
                    an optional solid base or transom at normal density) with glass doors
-                   (:mod:`engine.synth.hard.plan`, :mod:`engine.synth.structure`)
+                   (:mod:`engine.synth.hard.plan`, :mod:`engine.synth.faces`)
 ``unscanned``      rooms never scanned: one closed storage-like room per floor (two on big floors)
                    gets no scan position and no points; its walls are seen from outside only and its
                    doors are closed

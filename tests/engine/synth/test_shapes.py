@@ -10,8 +10,8 @@ from shapely.geometry import Polygon, box
 from engine.synth.building import Element, Space
 from engine.synth.geometry import Box, Poly
 from engine.synth.layout import Draft
-from engine.synth.plan import _walls
 from engine.synth.shapes import in_local_frame, rotate_xy, walls_from_polygons
+from engine.synth.walls import grid_walls
 
 CELLS = {0: (0.0, 0.0, 4.0, 5.0), 1: (4.0, 0.0, 9.0, 5.0), 2: (0.0, 5.0, 9.0, 7.0)}  # two rooms and a hallway
 
@@ -31,7 +31,7 @@ def _segments(walls):
 
 def test_polygon_walls_equal_the_cell_walls():
     spaces = _spaces()
-    cell_walls = _walls({i: Draft("room", [c]) for i, c in CELLS.items()}, 0, 0.0, spaces,
+    cell_walls = grid_walls({i: Draft("room", [c]) for i, c in CELLS.items()}, 0, 0.0, spaces,
                         np.random.default_rng(0), 0.3, 0, 9.0, 7.0)
     poly_walls = walls_from_polygons({i: box(*c) for i, c in CELLS.items()}, {}, 0, 0.0, spaces,
                                      lambda key: 0.15, 0.3, 0)

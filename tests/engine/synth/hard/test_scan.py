@@ -10,7 +10,7 @@ import shapely
 from shapely.geometry import Polygon
 
 from engine.synth import plan_building, scan_building
-from engine.synth.structure import GLASS_DENSITY
+from engine.synth.faces import GLASS_DENSITY
 from tiles.classes import CLASS_CODES
 
 

@@ -1,0 +1,21 @@
+"""Random streams of the generator: one per stage of one object, independent of every other.
+
+Every draw of :mod:`engine.synth` comes from ``rng_for(seed, stage, id...)``
+(``numpy.random.SeedSequence(seed, spawn_key=(stage, id...))``), so nothing
+depends on the order in which dask runs the tasks.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Random-stream keys (first element of every spawn_key).
+S_BUILDING, S_FLOOR, S_SPACE, S_SCAN = 0, 1, 2, 3
+
+#: Average floor area per space, used to turn ``rooms`` into an area.
+AREA_PER_SPACE = 31.0
+MIN_AREA_PER_FLOOR = 40.0
+
+
+def rng_for(seed: int, *key: int) -> np.random.Generator:
+    """The random stream of one stage of one object, independent of every other."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=tuple(int(k) for k in key)))
