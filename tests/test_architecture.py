@@ -128,3 +128,19 @@ def test_the_walker_sees_imports_inside_functions(tmp_path):
     path = tmp_path / "x.py"
     path.write_text(src)
     assert ("engine.crf.model", None, 2) in _imports("engine.x", path)
+
+
+#: Functions stay short enough to read at once (issue 24: "functions under ~80 lines"); drivers are a sequence of
+#: named steps.
+MAX_FUNCTION_LINES = 80
+
+
+def test_no_function_is_longer_than_the_limit():
+    long = []
+    for path in MODULES.values():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({n} lines)")
+    assert not long, "split into named steps: " + "; ".join(long)
