@@ -257,6 +257,7 @@ def _edited_metrics(metrics: dict[str, Any], record: dict[str, Any], run: str, s
 def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: int | None = None,
              line: Sequence[float] | None = None, in_place: bool = False) -> dict[str, Any]:
     """Apply one edit to the run folder ``run`` and write the edited run to ``out``; returns the edit record."""
+    from engine.outputs.daylight import add_daylight_to_geojson, daylight
     from engine.outputs.plan import draw_plan
     from engine.outputs.report import write_report
     from engine.outputs.statistics import add_statistics_to_geojson, space_statistics
@@ -280,7 +281,10 @@ def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: i
     os.makedirs(staging)
     record.update(rewrite_points(os.path.join(run, "points.laz"), os.path.join(staging, "points.laz"), record))
     stats = space_statistics(layer, elements)
-    layer = add_statistics_to_geojson(layer, stats)
+    figures = daylight(layer, elements, layer.get("crs_wkt"))
+    layer = add_daylight_to_geojson(add_statistics_to_geojson(layer, stats), figures)
+    for row in stats["spaces"]:
+        row.update(figures.get(int(row["id"]), {}))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
         json.dump(layer, f)
     with open(os.path.join(staging, "elements.json"), "w") as f:

@@ -9,8 +9,9 @@ edited one:
 * one ``IfcSpace`` per space: its footprint (outer ring; the largest part of a
   multi-part footprint) extruded from its floor to its ceiling, named
   ``Space <id>``, with ``Qto_SpaceBaseQuantities`` (net floor area, height,
-  gross volume) and ``BuildingParser_Space`` (id, points, and the statistics
-  and daylight figures of ``spaces.geojson`` when present);
+  gross volume) and ``BuildingParser_Space`` (every property of its
+  ``spaces.geojson`` feature: id, points, statistics, the daylight figures of
+  :mod:`engine.outputs.daylight`; lists as comma-separated text);
 * one product per detected element, its box as an extruded rectangle placed
   and turned (yaw) where the element is: wall ``IfcWall``, floor ``IfcSlab``
   (FLOOR), ceiling ``IfcCovering`` (CEILING), beam ``IfcBeam``, column
@@ -185,6 +186,7 @@ def _add_space(w: _Writer, f: dict[str, Any], storey) -> Any:
     api.pset.edit_qto(m, qto=qto, properties={"NetFloorArea": area, "Height": z1 - z0,
                                               "GrossVolume": area * (z1 - z0)})
     props = {k: v for k, v in p.items() if isinstance(v, (int, float, str, bool)) and v is not None}
+    props.update({k: ", ".join(str(x) for x in v) for k, v in p.items() if isinstance(v, list) and v})
     pset = api.pset.add_pset(m, product=space, name="BuildingParser_Space")
     api.pset.edit_pset(m, pset=pset, properties=props)
     return space

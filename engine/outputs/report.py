@@ -165,18 +165,26 @@ def _stats_section(stats: dict[str, Any] | None, viewer: str | None = None) -> s
         return '<p class="note">No space statistics (spaces.geojson or elements.json missing).</p>'
     total = stats["total"]
     classes = [c for c in ELEMENT_CLASSES if total["elements"].get(c, 0) > 0]
-    header = ["space", "area (m²)", "perimeter (m)", "height (m)", "points", *classes, "window/wall"]
+    lit = any(r.get("daylight_factor_pct") is not None for r in stats["spaces"])
+    header = ["space", "area (m²)", "perimeter (m)", "height (m)", "points", *classes, "window/wall",
+              *(["window/floor", "daylight factor (%)", "windows facing (°)"] if lit else [])]
     rows = []
     for r in stats["spaces"]:
         sid = (Html(f'<a href="{_esc(viewer)}#space={int(r["id"])}" title="open in the 3D view">{int(r["id"])}</a>')
                if viewer else str(r["id"]))
         rows.append([sid, fmt_float(r["area_m2"]), fmt_float(r["perimeter_m"]), fmt_float(r["height_m"]),
                      fmt_int(r["points"]), *[fmt_int(r["elements"][c]) for c in classes],
-                     fmt_float(r["window_to_wall"], 3)])
+                     fmt_float(r["window_to_wall"], 3),
+                     *([fmt_float(r.get("window_to_floor"), 3), fmt_float(r.get("daylight_factor_pct")),
+                        ", ".join(f"{b:g}" for b in r.get("window_bearings_deg") or [])] if lit else [])])
     tot = ["total", fmt_float(total["area_m2"]), fmt_float(total["perimeter_m"]), "", fmt_int(total["points"]),
-           *[fmt_int(total["elements"][c]) for c in classes], fmt_float(total["window_to_wall"], 3)]
+           *[fmt_int(total["elements"][c]) for c in classes], fmt_float(total["window_to_wall"], 3),
+           *(["", "", ""] if lit else [])]
     note = ('<p class="note">Window/wall: summed face area (longer horizontal side × height) of the detected '
-            'windows over that of the detected walls of the space.</p>')
+            'windows over that of the detected walls of the space.'
+            + (' Daylight factor: the BRE average daylight factor (T 0.68, sky angle 90°, reflectance 0.5; '
+               'engine/outputs/daylight.py); windows facing: the bearing of each window\'s outward normal '
+               '(true north with a CRS, else grid north).' if lit else '') + '</p>')
     return _table("space-stats", header, rows, total=tot) + note
 
 

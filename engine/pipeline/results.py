@@ -119,6 +119,7 @@ def write_plan_outputs(store: TileStore, final, elements, staging: str, client) 
     """``spaces.geojson``, ``elements.json``, the floor plan (``floorplan.png``, ``floorplan.svg``), the
     building model (``building.ifc``) and the 3D view (``viewer.html``) into ``staging``; returns the space
     statistics."""
+    from engine.outputs.daylight import add_daylight_to_geojson, daylight
     from engine.outputs.geojson import spaces_feature_collection
     from engine.outputs.labels import element_records, write_elements_json
     from engine.outputs.plan import draw_plan
@@ -128,7 +129,10 @@ def write_plan_outputs(store: TileStore, final, elements, staging: str, client) 
     geo = spaces_feature_collection(final, crs)
     records = element_records(elements, with_voxels=False)
     stats = space_statistics(geo, records)
-    layer = json_safe(add_statistics_to_geojson(geo, stats))
+    figures = daylight(geo, records, crs)
+    layer = json_safe(add_daylight_to_geojson(add_statistics_to_geojson(geo, stats), figures))
+    for row in stats["spaces"]:
+        row.update(figures.get(int(row["id"]), {}))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
         json.dump(layer, f, allow_nan=False)
     write_elements_json(elements, os.path.join(staging, "elements.json"))
