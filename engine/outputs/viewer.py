@@ -7,7 +7,8 @@ so no server and no network are needed).  What it shows:
   max-points`` in all (each space gets an equal share, a space with fewer
   points keeps them all and leaves its share to the others; points outside
   every space get one share), coloured by class (a legend entry per class),
-  by space (one per space) or by the scan's RGB (buttons switch the three);
+  by space or by the scan's RGB (buttons switch the three); the ceiling's
+  points start hidden, so that the rooms show from above;
 * the element boxes, one legend entry per class, with class, element id,
   space and score on hover;
 * the legend switches every layer on and off; ``viewer.html#space=ID`` opens
@@ -33,6 +34,8 @@ if TYPE_CHECKING:
 #: Colours of the classes (S3DIS order), as in the paper's figures' spirit: structure muted, furniture bright.
 CLASS_COLOURS = ("#c7c7c7", "#8c6d31", "#9e9ac8", "#636363", "#393b79", "#6baed6", "#e6550d", "#31a354",
                  "#fdae6b", "#d62728", "#8c564b", "#17becf", "#bdbdbd")
+#: Classes whose points start hidden (a click in the legend shows them): the ceiling hides the rooms from above.
+HIDDEN_AT_START = ("ceiling",)
 SEED = 20161  # fixed: the same run gives the same page
 #: Box edges as pairs of corner indices (corners in ``_corners`` order).
 EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7))
@@ -136,6 +139,7 @@ def viewer_figure(points: dict[str, np.ndarray], elements: list[dict[str, Any]],
         fig.add_trace(go.Scatter3d(x=p[:, 0], y=p[:, 1], z=p[:, 2], mode="markers", name=name,
                                    marker={"size": 1.6, "color": CLASS_COLOURS[int(code) % len(CLASS_COLOURS)]},
                                    hoverinfo="name", legendgroup="points", legendgrouptitle={"text": "points"},
+                                   visible="legendonly" if name in HIDDEN_AT_START else True,
                                    meta={"layer": "points"}))
         point_traces.append(len(fig.data) - 1)
         by_space.append([palette[int(s) % len(palette)] if s >= 0 else "#999999" for s in points["space"][m]])
@@ -164,8 +168,8 @@ def viewer_figure(points: dict[str, np.ndarray], elements: list[dict[str, Any]],
                                     "xanchor": "left"}] if point_traces else [],
                       margin={"l": 0, "r": 0, "t": 40, "b": 0}, legend={"groupclick": "toggleitem"},
                       title={"text": f"{len(xyz):,} points shown; coordinates relative to "
-                                     f"{np.round(origin, 2).tolist()}", "x": 0.99, "xanchor": "right",
-                             "font": {"size": 11}})
+                                     f"{np.round(origin, 2).tolist()}", "x": 0.01, "xanchor": "left",
+                             "y": 0.02, "yanchor": "bottom", "font": {"size": 11}})
     return fig
 
 
