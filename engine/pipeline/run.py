@@ -55,6 +55,7 @@ from engine.pipeline.stages import StageLog, StageRecord, Timer, fingerprint
 from tiles import paths
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
+from tiles.export_layout import LAYOUT_VERSION
 from tiles.store import TileStore, open_store
 from tiles.tasks import quiet_progress
 
@@ -126,7 +127,8 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
     # points.laz is written while the metrics and the small outputs are computed: those need the labels, not
     # the file, and their tasks and driver work fill the export's idle moments (its two task batches' ends).
     store.refresh()
-    fp_export = fingerprint("export", paths.join(ctx.out, "points.laz"), fp_labels, fp_update)
+    fp_export = fingerprint("export", {"path": paths.join(ctx.out, "points.laz"), "layout": LAYOUT_VERSION},
+                            fp_labels, fp_update)
     export_job = _start_export(ctx, fp_export)
     try:
         with quiet_progress(export_job is not None):

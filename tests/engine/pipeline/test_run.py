@@ -53,9 +53,14 @@ def test_run_writes_every_output_and_keeps_every_point_in_order(building, first_
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     src = _laz_dims(laz, "X", "Y", "Z", "red", "gt_space")
     res = _laz_dims(out / "points.laz", "X", "Y", "Z", "red", "gt_space", "classification", "space_id",
-                    "element_id")
+                    "element_id", "element_class")
     for n in ("X", "Y", "Z", "red", "gt_space"):
         np.testing.assert_array_equal(src[n], res[n], err_msg=n)
+    # LAS classes in the user-definable range (64 ceiling ... 76 clutter), the S3DIS code beside them
+    assert res["classification"].min() >= 64 and res["classification"].max() <= 76
+    np.testing.assert_array_equal(res["element_class"], res["classification"] - 64)
+    with laspy.open(out / "points.laz") as f:
+        assert f.header.vlrs.get("ClassificationLookupVlr")[0].lookups[66] == "wall"
     assert metrics["input"]["points"] == len(src["X"])
     # every point inside a space has a space id; labelled points carry the id of an element of elements.json
     assert np.mean(res["space_id"] >= 0) > 0.95
