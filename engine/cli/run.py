@@ -18,7 +18,8 @@ ingest into a tile store -> spaces (void-based dividers, merged over-segments)
 update from the detected walls -> per-point labels -> outputs and metrics.
 
 Writes into DIR: points.laz (every input point, input order, all input
-dimensions plus classification, space_id, element_id), spaces.geojson,
+dimensions plus classification = 64 + class code, element_class, space_id,
+element_id), spaces.geojson and spaces.gpkg (in the input's CRS),
 floorplan.png, elements.json, metrics.json (ARI and AP when the input has
 ground truth), report.html, buildingparser.log (every message of the run,
 with timestamps), and store.zarr (the tile store) unless INPUT is a store

@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from engine.outputs.geojson import write_spaces_geojson
     from engine.pipeline.cluster import check_reachable, cluster_client
     from engine.spaces.parse import SpaceSettings, parse_spaces
+    from tiles.crs import parse_crs
     from tiles.store import open_store
 
     store = open_store(args.store, args.storage_options)
@@ -57,8 +58,7 @@ def run(args: argparse.Namespace) -> int:
             over = distributed_ari(store, "gt_space", "cell_id", client=client)
             print(f"ARI final {final:.4f}, over-segmented {over:.4f}")
         if args.geojson:
-            crs = (store.meta.crs or {}).get("wkt") if store.meta.crs else None
-            logger.info("spaces: %s", write_spaces_geojson(parse, args.geojson, crs))
+            logger.info("spaces: %s", write_spaces_geojson(parse, args.geojson, parse_crs(store.meta.crs)))
         if args.png:
             logger.info("floor plan: %s", draw_floorplan(store, parse, args.png, client=client))
     return 0

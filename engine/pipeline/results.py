@@ -114,17 +114,20 @@ def compute_metrics(store: TileStore, input: str, parsed, final, proposals, elem
 
 
 def write_plan_outputs(store: TileStore, final, elements, staging: str, client) -> dict[str, Any]:
-    """``spaces.geojson``, ``elements.json`` and ``floorplan.png`` into ``staging``; returns the space statistics."""
+    """``spaces.geojson``, ``spaces.gpkg``, ``elements.json`` and ``floorplan.png`` into ``staging``; returns the space statistics."""
     from engine.outputs.floorplan import draw_floorplan
-    from engine.outputs.geojson import spaces_feature_collection
+    from engine.outputs.geojson import spaces_feature_collection, write_spaces_gpkg
     from engine.outputs.labels import element_records, write_elements_json
     from engine.outputs.statistics import add_statistics_to_geojson, space_statistics
+    from tiles.crs import parse_crs
 
-    crs = (store.meta.crs or {}).get("wkt")
+    crs = parse_crs(store.meta.crs)
     geo = spaces_feature_collection(final, crs)
     stats = space_statistics(geo, element_records(elements, with_voxels=False))
+    collection = json_safe(add_statistics_to_geojson(geo, stats))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
-        json.dump(json_safe(add_statistics_to_geojson(geo, stats)), f, allow_nan=False)
+        json.dump(collection, f, allow_nan=False)
+    write_spaces_gpkg(collection, os.path.join(staging, "spaces.gpkg"), crs)
     write_elements_json(elements, os.path.join(staging, "elements.json"))
     draw_floorplan(store, final, os.path.join(staging, "floorplan.png"), client=client)
     return stats
@@ -187,7 +190,7 @@ def summary_lines(metrics: dict[str, Any], out: str) -> list[str]:
                      f"{pct(d['map_before_crf'])}{ranked}; point mIoU {pct(d['miou'])}")
         lines.append("AP per class: " + ", ".join(f"{k} {pct(v)}" for k, v in d["ap"].items()))
     lines.append("elements: " + (", ".join(f"{k} {v}" for k, v in metrics.get("elements", {}).items()) or "none"))
-    written = [n for n in ("points.laz", "spaces.geojson", "floorplan.png", "elements.json", "metrics.json",
+    written = [n for n in ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "elements.json", "metrics.json",
                            "report.html") if n != "points.laz" or metrics.get("points_written", True)]
     for name in written:
         lines.append(f"{name}: {paths.join(out, name)}")

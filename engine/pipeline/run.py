@@ -5,8 +5,10 @@
 
 =================  ==================================================================
 ``points.laz``     every input point in input order with its input dimensions, plus
-                   ``classification``, ``space_id``, ``element_id`` (:mod:`tiles.export`)
-``spaces.geojson`` one feature per space, world coordinates, with the space statistics
+                   ``classification`` (64 + code), ``element_class``, ``space_id``, ``element_id``
+                   (:mod:`tiles.export`)
+``spaces.geojson`` one feature per space, world coordinates, with the space statistics (CRS member GDAL reads)
+``spaces.gpkg``    the same as a GeoPackage with its CRS (:mod:`engine.outputs.geojson`)
 ``floorplan.png``  the top view of the spaces and dividers
 ``elements.json``  the detected elements after the CRF (:mod:`engine.detection.proposals`)
 ``metrics.json``   counts, ARI and AP when the input has ground truth, timings (:mod:`engine.outputs.report`)

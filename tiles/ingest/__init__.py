@@ -22,6 +22,7 @@ import numpy as np
 from tiles import paths, scratch
 from tiles.builder import StoreBuilder
 from tiles.config import setting
+from tiles.crs import same_crs
 from tiles.errors import UserError
 from tiles.ingest.files import is_dir
 from tiles.ingest.reader import Quantization, Reader, complete_columns, offset_near, union_dimensions
@@ -109,7 +110,8 @@ def choose_grid(readers: list[Reader]) -> Quantization:
 
 
 def merged_crs(readers: list[Reader]) -> dict[str, Any] | None:
-    """The one CRS of all sources (sources without a CRS do not count); a clear error if two differ."""
+    """The one CRS of all sources (sources without a CRS do not count); a clear error if two differ
+    (compared through pyproj: the same CRS as WKT in one file and GeoTIFF keys in another is one CRS)."""
     crs, first = None, None
     for r in readers:
         c = r.crs()
@@ -117,14 +119,10 @@ def merged_crs(readers: list[Reader]) -> dict[str, Any] | None:
             continue
         if crs is None:
             crs, first = c, r
-        elif _crs_key(c) != _crs_key(crs):
+        elif not same_crs(c, crs):
             raise UserError(r.path, f"its coordinate reference system differs from the one of {first.path}: "
                                     "reproject to one CRS first")
     return crs
-
-
-def _crs_key(c: dict[str, Any]):
-    return (c.get("wkt"), c.get("epsg"), str((c.get("geotiff") or {}).get("keys")))
 
 
 def merged_las(readers: list[Reader], dims) -> dict[str, Any] | None:

@@ -19,7 +19,7 @@ from tests.engine.pipeline.logged import logged
 from tiles.store import open_store
 from tiles.tasks import TaskFailures
 
-OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "elements.json", "metrics.json", "report.html")
+OUTPUTS = ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "elements.json", "metrics.json", "report.html")
 
 
 @pytest.fixture(scope="module")
