@@ -42,6 +42,7 @@ from engine.pipeline.documents import (
     save_proposals,
     space_lookup,
 )
+from engine.pipeline.provenance import Provenance
 from engine.pipeline.results import (
     all_timings,
     compute_metrics,
@@ -91,10 +92,12 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
     _check_out(out)
     pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
     withdraw_report(out, opt.storage_options)
+    provenance = Provenance(input, storage_options=opt.storage_options, is_store=is_store(input, opt.storage_options))
     staging = tempfile.mkdtemp(prefix="buildingparser-run-")
     try:
         with performance_report(client, os.path.join(staging, "dask-report.html")):
             metrics, stats = _compute(input, out, client, opt, staging)
+        metrics["provenance"] = provenance.finish(model_path=opt.model, options=opt, client=client)
         write_metrics_outputs(metrics, stats, staging)
         publish(staging, out, opt.storage_options)
         return metrics

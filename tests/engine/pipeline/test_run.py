@@ -62,6 +62,13 @@ def test_run_writes_every_output_and_keeps_every_point_in_order(building, first_
     with laspy.open(out / "points.laz") as f:
         assert f.header.vlrs.get("ClassificationLookupVlr")[0].lookups[66] == "wall"
     assert metrics["input"]["points"] == len(src["X"])
+    import hashlib
+
+    prov = metrics["provenance"]
+    assert prov["input"] == {"name": laz.name, "size": laz.stat().st_size,
+                             "sha256": hashlib.sha256(laz.read_bytes()).hexdigest()}
+    assert prov["model"]["sha256"] and prov["started"] <= prov["ended"] and prov["cluster"]["workers"] >= 1
+    assert "Provenance" in (out / "report.html").read_text()
     # every point inside a space has a space id; labelled points carry the id of an element of elements.json
     assert np.mean(res["space_id"] >= 0) > 0.95
     elements = json.loads((out / "elements.json").read_text())
