@@ -30,7 +30,7 @@ import tempfile
 from typing import Any
 
 from engine.config import validate_settings
-from engine.pipeline.cluster import pin_library_threads
+from engine.pipeline.cluster import performance_report, pin_library_threads
 from engine.pipeline.context import RunContext, RunSettings
 from engine.pipeline.documents import (
     ELEMENTS_DOC,
@@ -370,28 +370,3 @@ def _check_out(out: str) -> None:
         if os.path.exists(p) and not os.path.isdir(p):
             raise UserError(out, "the output folder is a file")
         os.makedirs(p, exist_ok=True)
-
-
-@contextlib.contextmanager
-def performance_report(client, path: str):
-    """dask's performance report of the block into ``path`` (when there is a cluster and bokeh).
-
-    The report is a by-product: if dask cannot write it (no bokeh on the
-    scheduler, a lost connection), the run goes on and logs a warning.
-    """
-    import importlib.util
-
-    if client is None or importlib.util.find_spec("bokeh") is None:
-        yield
-        return
-    from distributed import performance_report as pr
-
-    report = pr(filename=path)
-    report.__enter__()
-    try:
-        yield
-    finally:
-        try:
-            report.__exit__(None, None, None)
-        except Exception as exc:  # noqa: BLE001 - never lose a run for its performance report
-            logger.warning("dask performance report not written: %s: %s", type(exc).__name__, exc)
