@@ -52,6 +52,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.cli.logs import run_log
     from engine.pipeline.cluster import check_reachable, cluster_client
+    from engine.pipeline.context import check_run_inputs
     from engine.pipeline.results import summary_lines
     from engine.pipeline.run import RunSettings
     from engine.pipeline.run import run as run_pipeline
@@ -59,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     options = RunSettings(model=args.model, store=args.store, force=args.force, crf=not args.no_crf,
                          update=not args.no_update, export_points=not args.no_points, tile_size=args.tile_size,
                          storage_options=args.storage_options)
+    check_run_inputs(args.input, options)  # a missing input is refused before the cluster starts and DIR is made
     with run_log(args.out, args.storage_options):
         logger.debug("run %s --out %s: %s", args.input, args.out, options)
         with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:

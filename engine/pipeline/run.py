@@ -31,7 +31,7 @@ from typing import Any
 
 from engine.config import validate_settings
 from engine.pipeline.cluster import performance_report, pin_library_threads
-from engine.pipeline.context import RunContext, RunSettings
+from engine.pipeline.context import RunContext, RunSettings, check_run_inputs
 from engine.pipeline.documents import (
     ELEMENTS_DOC,
     PROPOSALS_DOC,
@@ -88,6 +88,7 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
     """
     validate_settings()  # every buildingparser.* setting, before any work starts
     opt = options or RunSettings()
+    check_run_inputs(input, opt)  # before any folder is made
     out = paths.normalize(out)
     _check_out(out)
     pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)

@@ -88,10 +88,24 @@ def precheck(sources: Sequence[str], store: str, *, overwrite: bool = False,
         path = paths.normalize(src)
         if path == store:
             raise UserError(store, "the store cannot be one of the inputs")
-        if not paths.exists(path, storage_options):
-            raise UserError(path, "no such file or folder")
+        check_source(path, storage_options)
     if paths.exists(store, storage_options) and not overwrite:
         raise UserError(store, "already exists: choose another name or pass --overwrite")
+
+
+def check_source(src: str, storage_options: dict[str, Any] | None = None) -> None:
+    """Cheap checks of one input before any cluster starts: it exists, and a file has a known extension
+    (a folder is an S3DIS area or folder of areas, looked into by the ingest itself)."""
+    from tiles.ingest.e57 import EXTENSIONS as E57_EXT
+    from tiles.ingest.text import EXTENSIONS as TEXT_EXT
+
+    path = paths.normalize(src)
+    if not paths.exists(path, storage_options):
+        raise UserError(path, "no such file or folder")
+    ext = os.path.splitext(path.lower())[1]
+    if not is_dir(path, storage_options) and ext not in LAS_EXTENSIONS + TEXT_EXT + E57_EXT:
+        raise UserError(path, f"unknown extension {ext or '(none)'!r}: expected .las, .laz, "
+                              + ", ".join(TEXT_EXT + E57_EXT) + " or an S3DIS folder")
 
 
 def choose_grid(readers: list[Reader]) -> Quantization:
