@@ -176,6 +176,7 @@ def test_embedded_cluster_and_run_pin_library_pools(tmp_path, monkeypatch):
     seen = []
     monkeypatch.setattr(pipeline, "pin_library_threads", seen.append)
     monkeypatch.setattr(pipeline, "withdraw_report", lambda out, options: (_ for _ in ()).throw(RuntimeError("stop")))
+    (tmp_path / "in.laz").write_bytes(b"")  # the input must exist: it is checked first
     with pytest.raises(RuntimeError, match="stop"):
         pipeline.run(str(tmp_path / "in.laz"), str(tmp_path / "out"), client="a client")
     assert seen == ["a client"]

@@ -248,12 +248,18 @@ def test_cli_run_logs_a_line_per_stage_and_keeps_every_message_in_the_output_fol
     got = capsys.readouterr()
     assert got.err == "" and "ARI" in got.out
     assert "engine.pipeline.run: spaces: " in (out / "buildingparser.log").read_text()  # the file keeps them
-    failed = out.parent / "no-such-input-out"
-    assert main(["run", str(out.parent / "nope.laz"), "--out", str(failed), "--model", model,
+    failed = out.parent / "broken-input-out"
+    broken = out.parent / "broken.laz"  # there, so it passes the checks before the cluster; not a LAS file
+    broken.write_bytes(b"not a LAS file" * 10)
+    assert main(["run", str(broken), "--out", str(failed), "--model", model,
                  "--scheduler", client.scheduler.address]) == 2
     log = (failed / "buildingparser.log").read_text()
-    assert "ERROR" in log and "nope.laz" in log and "Traceback" in log
+    assert "ERROR" in log and "broken.laz" in log and "Traceback" in log
     assert "Traceback" not in capsys.readouterr().err
+    missing = out.parent / "no-such-input-out"  # a missing input is refused before anything is made
+    assert main(["run", str(out.parent / "nope.laz"), "--out", str(missing), "--model", model,
+                 "--scheduler", client.scheduler.address]) == 2
+    assert not missing.exists()
 
 
 def test_killing_a_worker_mid_run_changes_nothing(building, first_run, tmp_path):
