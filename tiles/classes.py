@@ -10,6 +10,9 @@ CLUTTER = CLASS_CODES["clutter"]
 
 #: The 12 element classes that are detected and scored (clutter is not an element).
 ELEMENT_CLASSES: tuple[str, ...] = CLASS_NAMES[:12]
+#: ``points.laz`` stores class ``c`` as LAS classification ``LAS_CLASS_OFFSET + c`` (64 ceiling ... 76
+#: clutter): LAS 1.4 reserves 0-63 for the ASPRS classes, 64-255 are user-definable.
+LAS_CLASS_OFFSET = 64
 STRUCTURAL_CLASSES: tuple[str, ...] = ("ceiling", "floor", "wall", "beam", "column", "window", "door")
 FURNITURE_CLASSES: tuple[str, ...] = ("table", "chair", "sofa", "bookcase", "board")
 
@@ -29,3 +32,8 @@ def element_class_list(value, key: str) -> tuple[str, ...]:
 def class_code(name: str) -> int:
     """Code of a class name; names outside the 13 classes (e.g. ``stairs``) are clutter."""
     return CLASS_CODES.get(name.strip().lower(), CLUTTER)
+
+
+def las_class_lookup() -> dict[int, str]:
+    """The LAS Classification Lookup of ``points.laz``: LAS class number -> name (64 ceiling ... 76 clutter)."""
+    return {LAS_CLASS_OFFSET + code: name for code, name in enumerate(CLASS_NAMES)}

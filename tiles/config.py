@@ -208,6 +208,31 @@ def _unknown(key: str) -> str:
     return f"unknown setting {ROOT}.{key}{hint}"
 
 
+def non_default_settings() -> dict[str, Any]:
+    """Every declared ``buildingparser.*`` setting whose value differs from its default: dotted key -> value.
+
+    The default of a key is what the packages' YAML files (dask's registered defaults) or
+    :data:`SCHEMA_DEFAULTS` give it; both sides go through the key's declaration, so ``"20"`` and ``20``
+    are one value.
+    """
+    registered = dask.config.merge(*dask.config.defaults).get(ROOT, {})
+    out: dict[str, Any] = {}
+    for key, spec in sorted(SCHEMA.items()):
+        node: Any = registered
+        for part in key.split("."):
+            node = node.get(part, _ABSENT) if isinstance(node, Mapping) else _ABSENT
+        if node is _ABSENT:
+            node = SCHEMA_DEFAULTS.get(key)
+        try:
+            default = None if node is None else spec.check(node)
+        except ValueError:
+            default = node
+        value = setting(key)
+        if value != default:
+            out[key] = value
+    return out
+
+
 # -- this package's settings ---------------------------------------------------------------------------
 
 declare({

@@ -1,7 +1,9 @@
 """The exported file's LAS 1.4 header: built from the store's metadata, grown unit by unit.
 
 :func:`build_header` gives the header, its VLRs and the EVLRs from ``meta.las``
-(a WKT CRS of a non-LAS source becomes a WKT VLR).  Each unit's task computes
+(a WKT CRS of a non-LAS source becomes a WKT VLR; a classification result
+brings the Classification Lookup VLR naming 64 ceiling ... 76 clutter, in
+place of the source's).  Each unit's task computes
 its :class:`UnitStats` (bounds, GPS time range, returns, extra-bytes ranges);
 the driver adds them up with :func:`grow_header` and :func:`set_extra_ranges`
 to the same header laspy's own writer would make for the whole cloud.
@@ -15,7 +17,9 @@ from typing import Any
 
 import laspy
 import numpy as np
+from laspy.vlrs.known import ClassificationLookupVlr
 
+from tiles.classes import las_class_lookup
 from tiles.export_layout import Layout
 from tiles.ingest.lasformat import vlr_from_json
 from tiles.schema import software_name
@@ -43,9 +47,21 @@ def build_header(store: TileStore, layout: Layout) -> tuple[laspy.LasHeader, lis
         vlrs.append(laspy.VLR("LASF_Projection", 2112, "OGC WKT", meta.crs["wkt"].encode() + b"\0"))
         ge |= 0b10000
     header.global_encoding.value = ge
+    if layout.class_lookup:
+        vlrs = [v for v in vlrs if (v.user_id, v.record_id) != ("LASF_Spec", 0)] + [class_lookup_vlr()]
     for v in vlrs:
         header.vlrs.append(v)
     return header, evlrs
+
+
+def class_lookup_vlr() -> ClassificationLookupVlr:
+    """The LAS Classification Lookup VLR (``LASF_Spec``/0): 256 entries of (class number, 15-byte name),
+    the classes of :func:`tiles.classes.las_class_lookup` named, the others blank."""
+    names = las_class_lookup()
+    vlr = ClassificationLookupVlr()
+    for number in range(256):
+        vlr[number] = names.get(number, "")
+    return vlr
 
 
 @dataclass

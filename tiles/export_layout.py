@@ -3,7 +3,10 @@
 The point format is the source's (``meta.las["point_format"]``), 7 for stores
 without a LAS source; stored LAS fields go back to their fields, results and
 ground truth become extra bytes (a ``classification`` result fills the LAS
-field).  The rules: docs/design/tiles.md, "What goes where".
+field as ``64 + code``, the user-definable LAS 1.4 range, and the extra
+dimension ``element_class`` as the code 0-12).  A legacy source format (0-5)
+is raised to its LAS 1.4 twin when there is a classification result: its
+5-bit field cannot hold 64-76.  The rules: docs/design/tiles.md, "What goes where".
 """
 from __future__ import annotations
 
@@ -13,12 +16,19 @@ from typing import Any
 import laspy
 import numpy as np
 
+from tiles.classes import LAS_CLASS_OFFSET
 from tiles.errors import UserError
 from tiles.ingest.lasformat import bit_shift, standard_names, subfields
 from tiles.store import TileStore
 
 #: LAS extra-bytes names and descriptions are at most 32 bytes.
 _NAME_LEN = 32
+#: The LAS 1.4 point format that holds everything of a legacy one (0-5): 64-76 need a full classification byte.
+LAS14_TWIN = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+#: Bumped when the exported file's layout changes (a resumed run then rewrites ``points.laz``).
+LAYOUT_VERSION = 2
+#: Degrees per unit of the LAS 1.4 ``scan_angle`` field (legacy ``scan_angle_rank`` is whole degrees).
+_SCAN_ANGLE_UNIT = 0.006
 
 
 @dataclass
@@ -26,11 +36,12 @@ class Column:
     """Where one store array goes in the LAS record."""
 
     store: str
-    how: str  # "field", "bits", "component"
+    how: str  # "field", "bits", "component", "angle" (legacy scan_angle_rank into scan_angle)
     target: str  # LAS field (or packed field for bits)
     mask: int = 0
     component: int = 0
     scale_colour: bool = False
+    add: int = 0  # added to the value (the classification result: LAS_CLASS_OFFSET)
 
 
 @dataclass
@@ -40,6 +51,7 @@ class Layout:
     point_format: int
     extra: list[dict[str, Any]] = field(default_factory=list)
     columns: list[Column] = field(default_factory=list)
+    class_lookup: bool = False  # the classification field holds 64 + class code: write the lookup VLR
 
     def point_format_obj(self) -> laspy.PointFormat:
         """The laspy point format with the extra-bytes records."""
@@ -62,9 +74,15 @@ def plan_layout(store: TileStore, point_format: int | None = None) -> Layout:
     fmt = point_format if point_format is not None else int((meta.las or {}).get("point_format", 7))
     if not 0 <= fmt <= 10:
         raise UserError(None, f"LAS point format must be 0-10, not {fmt}")
+    has_result_class = any(d.name == "classification" and d.kind == "result" for d in meta.dimensions)
+    raised = has_result_class and fmt in LAS14_TWIN
+    if raised:
+        if point_format is not None:
+            raise UserError(None, f"the classes (LAS codes {LAS_CLASS_OFFSET}-{LAS_CLASS_OFFSET + 12}) do not fit "
+                                  f"the 5-bit classification of point format {fmt}: export to a format >= 6")
+        fmt = LAS14_TWIN[fmt]
     std = set(standard_names(fmt))
     subs = subfields(fmt)
-    has_result_class = any(d.name == "classification" and d.kind == "result" for d in meta.dimensions)
     scale_colour = meta.las is None and meta.color_depth == 8
     layout = Layout(fmt)
     used: set[str] = set(std) | {"X", "Y", "Z"}
@@ -94,7 +112,12 @@ def plan_layout(store: TileStore, point_format: int | None = None) -> Layout:
         if d.kind == "result":
             if d.name == "classification" and "classification" in std:
                 std_taken.add("classification")
-                layout.columns.append(_std_column(d.name, "classification", subs))
+                col = _std_column(d.name, "classification", subs)
+                col.add = LAS_CLASS_OFFSET
+                layout.columns.append(col)
+                layout.columns.append(Column(d.name, "field", add_extra("element_class", "u1",
+                                                                        "S3DIS class 0 ceiling..12 clutter", None)))
+                layout.class_lookup = True
             else:
                 layout.columns.append(Column(d.name, "field", add_extra(d.name, plain, d.description or d.name,
                                                                         None)))
@@ -102,6 +125,9 @@ def plan_layout(store: TileStore, point_format: int | None = None) -> Layout:
             if lname == "classification" and has_result_class:
                 target = add_extra("source_classification", plain, "classification of the source", None)
                 layout.columns.append(Column(d.name, "field", target))
+            elif raised and lname == "scan_angle_rank" and "scan_angle" not in std_taken:
+                std_taken.add("scan_angle")  # a legacy source raised to its LAS 1.4 twin
+                layout.columns.append(Column(d.name, "angle", "scan_angle"))
             elif lname in std and lname not in std_taken:
                 std_taken.add(lname)
                 col = _std_column(d.name, lname, subs)
@@ -138,6 +164,10 @@ def pack_part(cols: dict[str, np.ndarray], layout: Layout) -> np.ndarray:
         v = cols[c.store]
         if c.scale_colour:
             v = v.astype(np.uint16) * np.uint16(257)
+        if c.add:
+            v = v.astype(np.int64) + c.add
+        if c.how == "angle":
+            v = np.round(v.astype(np.float64) / _SCAN_ANGLE_UNIT).astype(np.int16)
         if c.how == "bits":
             top = c.mask >> bit_shift(c.mask)
             if len(v) and (v.min() < 0 or v.max() > top):

@@ -1,4 +1,9 @@
-"""Local paths and fsspec URLs treated alike: existence, joining, removal, atomic publish."""
+"""Local paths and fsspec URLs treated alike: existence, joining, removal, atomic publish.
+
+A URL whose protocol needs a package that is not installed (``s3://`` needs
+s3fs, the ``[s3]`` extra) is one clear :class:`tiles.errors.UserError`
+(:func:`require_protocol`), checked by :func:`normalize` and :func:`filesystem`.
+"""
 from __future__ import annotations
 
 import os
@@ -8,6 +13,12 @@ import uuid
 from typing import Any
 
 import fsspec
+from fsspec.registry import known_implementations
+
+from tiles.errors import UserError
+
+#: Protocols that an extra of the package installs: protocol -> extra.
+EXTRAS = {"s3": "s3", "s3a": "s3"}
 
 
 def is_url(path: str) -> bool:
@@ -26,16 +37,40 @@ def local_path(path: str) -> str:
     return p[len("file://"):] if p.startswith("file://") else os.path.abspath(os.path.expanduser(p))
 
 
+def require_protocol(path: str) -> None:
+    """Refuse a URL whose fsspec protocol's package is missing, naming what to install (a no-op for local paths
+    and for protocols fsspec does not know: fsspec's own error then says it)."""
+    import importlib
+
+    if is_local(path):
+        return
+    protocol = str(path).split("://", 1)[0].split("::")[-1].lower()
+    impl = known_implementations.get(protocol)
+    if impl is None:
+        return
+    module = impl["class"].rsplit(".", 1)[0]
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        top = module.split(".")[0]
+        how = (f"pip install 'buildingparser[{EXTRAS[protocol]}]'" if protocol in EXTRAS
+               else f"pip install {top}")
+        raise UserError(path, f"{protocol}:// paths need the package {top}, which is not installed: {how}") from None
+
+
 def normalize(path: str | os.PathLike) -> str:
-    """An absolute local path, or the URL unchanged (trailing slashes removed)."""
+    """An absolute local path, or the URL unchanged (trailing slashes removed); a URL whose protocol's package
+    is missing is refused (:func:`require_protocol`)."""
     p = os.fspath(path)
     if is_url(p) and not p.startswith("file://"):
+        require_protocol(p)
         return p.rstrip("/")
     return local_path(p).rstrip("/") or "/"
 
 
 def filesystem(path: str, storage_options: dict[str, Any] | None = None) -> tuple[fsspec.AbstractFileSystem, str]:
     """The fsspec filesystem of ``path`` and the path inside it."""
+    require_protocol(path)
     return fsspec.core.url_to_fs(path, **(storage_options or {}))
 
 

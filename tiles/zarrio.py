@@ -39,6 +39,7 @@ def open_group(url: str, storage_options: dict[str, Any] | None, mode: str) -> z
     kw: dict[str, Any] = {"mode": mode, "zarr_format": 3}
     if paths.is_local(url):
         return zarr.open_group(paths.local_path(url), **kw)
+    paths.require_protocol(url)
     return zarr.open_group(url, storage_options=storage_options, **kw)
 
 

@@ -10,9 +10,12 @@ DESCRIPTION = """\
 Write a tile store as a LAS 1.4 (.las) or LAZ (.laz) file, in the input's point
 order, with every input dimension and the results the store holds:
 
-  classification      the class codes (0 ceiling ... 12 clutter) in the LAS field;
-                      the source's own classification is kept as the extra-bytes
-                      dimension source_classification
+  classification      64 + the class code (64 ceiling ... 76 clutter: LAS 1.4's
+                      user-definable range), named by a Classification Lookup
+                      VLR; the source's own classification is kept as the
+                      extra-bytes dimension source_classification; a legacy
+                      point format (0-5) is raised to its LAS 1.4 twin (6-10)
+  element_class       the class code 0-12 (S3DIS order), extra-bytes uint8
   space_id, element_id
                       extra-bytes int32 dimensions (-1: none)
   gt_space, gt_class, gt_instance

@@ -18,7 +18,8 @@ ingest into a tile store -> spaces (void-based dividers, merged over-segments)
 update from the detected walls -> per-point labels -> outputs and metrics.
 
 Writes into DIR: points.laz (every input point, input order, all input
-dimensions plus classification, space_id, element_id), spaces.geojson,
+dimensions plus classification = 64 + class code, element_class, space_id,
+element_id), spaces.geojson and spaces.gpkg (in the input's CRS),
 floorplan.png, elements.json, metrics.json (ARI and AP when the input has
 ground truth), report.html, buildingparser.log (every message of the run,
 with timestamps), and store.zarr (the tile store) unless INPUT is a store
@@ -58,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
 
     from engine.cli.logs import run_log
     from engine.pipeline.cluster import check_reachable, cluster_client
+    from engine.pipeline.context import check_run_inputs
     from engine.pipeline.results import summary_lines
     from engine.pipeline.run import RunSettings
     from engine.pipeline.run import run as run_pipeline
@@ -65,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     options = RunSettings(model=args.model, store=args.store, force=args.force, crf=not args.no_crf,
                          update=not args.no_update, export_points=not args.no_points, tile_size=args.tile_size,
                          storage_options=args.storage_options)
+    check_run_inputs(args.input, options)  # a missing input is refused before the cluster starts and DIR is made
     with run_log(args.out, args.storage_options):
         logger.debug("run %s --out %s: %s", args.input, args.out, options)
         with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:

@@ -20,7 +20,7 @@ spaces, and the Adjusted Rand Index of spaces and cells when the store has
 ground truth (gt_space).  Settings: buildingparser.spaces.* (engine/spaces/spaces.yaml).
 
 examples:
-  buildingparser spaces building.zarr --png floorplan.png --geojson spaces.geojson
+  buildingparser spaces building.zarr --png floorplan.png --geojson spaces.geojson --gpkg spaces.gpkg
   buildingparser spaces s3://bucket/area1.zarr --scheduler tcp://10.0.0.5:8786
 """
 
@@ -31,6 +31,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("store", metavar="STORE", help="the tile store (path or URL)")
     parser.add_argument("--png", metavar="FILE", help="also draw the floor plan to FILE (PNG)")
     parser.add_argument("--geojson", metavar="FILE", help="also write the spaces' footprints to FILE (GeoJSON)")
+    parser.add_argument("--gpkg", metavar="FILE", help="also write the spaces' footprints to FILE (GeoPackage)")
     parser.add_argument("--yaw", type=float, metavar="DEGREES",
                         help="use this yaw of the building's first axis instead of estimating it")
     add_cluster_options(parser)
@@ -40,10 +41,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.metrics.ari import distributed_ari
     from engine.outputs.floorplan import draw_floorplan
-    from engine.outputs.geojson import write_spaces_geojson
+    from engine.outputs.geojson import spaces_feature_collection, write_spaces_geojson, write_spaces_gpkg
     from engine.pipeline.cluster import check_reachable, cluster_client
     from engine.spaces.parse import parse_spaces
     from engine.spaces.settings import SpaceSettings
+    from tiles.crs import parse_crs
     from tiles.store import open_store
 
     store = open_store(args.store, args.storage_options)
@@ -58,8 +60,10 @@ def run(args: argparse.Namespace) -> int:
             over = distributed_ari(store, "gt_space", "cell_id", client=client)
             print(f"ARI final {final:.4f}, over-segmented {over:.4f}")
         if args.geojson:
-            crs = (store.meta.crs or {}).get("wkt") if store.meta.crs else None
-            logger.info("spaces: %s", write_spaces_geojson(parse, args.geojson, crs))
+            logger.info("spaces: %s", write_spaces_geojson(parse, args.geojson, parse_crs(store.meta.crs)))
+        if args.gpkg:
+            crs = parse_crs(store.meta.crs)
+            logger.info("spaces: %s", write_spaces_gpkg(spaces_feature_collection(parse, crs), args.gpkg, crs))
         if args.png:
             logger.info("floor plan: %s", draw_floorplan(store, parse, args.png, client=client))
     return 0

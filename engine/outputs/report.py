@@ -10,8 +10,9 @@ Sections: the input; the floor plan; spaces (count, cells, ARI); the space
 statistics table (:mod:`engine.outputs.statistics`: area, perimeter, points, element
 counts per class, window-to-wall ratio); detection (per-class AP with and
 without the CRF, point IoU) when there is ground truth; the CRF (spaces, solve
-times, solver statuses); elements per class; timings per stage; the dask
-performance report.
+times, solver statuses); elements per class; timings per stage; provenance
+(version, git commit, model and its SHA-256, non-default settings, input name,
+size and SHA-256, start and end, cluster); the dask performance report.
 
 ``metrics.json``, which this page renders (other tools read it too)::
 
@@ -29,7 +30,8 @@ performance report.
      "crf": {"spaces": int, "solve_seconds": {"median": float, "max": float},
              "status": {status_name: count},
              "proposals": int, "kept": int, "decides": [class, ...]},    # the last three optional
-     "timings": {stage: seconds}, "elements": {class: count}}
+     "timings": {stage: seconds}, "elements": {class: count},
+     "provenance": {...}}   # engine.pipeline.provenance; optional
 
 Fractions (AP, IoU, ARI) are stored in [0, 1] and shown as percentages with
 two decimals for AP and IoU (as in the paper's tables) and as fractions with
@@ -58,8 +60,8 @@ from tiles.classes import ELEMENT_CLASSES
 REPORT = "report.html"
 #: CRF solver statuses of spaces solved exactly (see :mod:`engine.crf.model`).
 SOLVED = ("OPTIMAL", "TRIVIAL", "EMPTY")
-OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "building.ifc", "viewer.html",
-           "elements.json", "metrics.json", "dask-report.html")
+OUTPUTS = ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
+           "viewer.html", "elements.json", "metrics.json", "dask-report.html")
 
 _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:2rem auto;max-width:72rem;
@@ -254,6 +256,29 @@ def _timings_section(m: dict[str, Any]) -> str:
     return _table("timings", ["stage", "seconds"], rows, total=["total", fmt_float(sum(float(v) for v in t.values()))])
 
 
+def _provenance_section(metrics: dict[str, Any]) -> str:
+    p = metrics.get("provenance")
+    if not p:
+        return '<p class="note">No provenance recorded.</p>'
+    git, model, src, cl = p.get("git") or {}, p.get("model") or {}, p.get("input") or {}, p.get("cluster") or {}
+    settings = {**{f"buildingparser.{k}": v for k, v in (p.get("settings") or {}).get("buildingparser", {}).items()},
+                **{f"run: {k}": v for k, v in (p.get("settings") or {}).get("run", {}).items()}}
+    rows = [["package", f"{p.get('package', 'buildingparser')} {p.get('version') or '(not installed)'}"],
+            ["git commit", (git.get("commit", "") + (" (uncommitted changes)" if git.get("dirty") else ""))
+             if git else "n/a"],
+            ["model", f"{model.get('name', 'n/a')}" + (" (shipped default)" if model.get("default") else "")],
+            *[[f"model sha256: {k}", v] for k, v in (model.get("sha256") or {}).items()],
+            ["input", f"{src.get('name', 'n/a')}, {src.get('size', 0):,} bytes"
+                      + (f", {src['files']} files" if src.get("files") else "")],
+            ["input sha256", src.get("sha256") or "n/a"],
+            ["started", p.get("started", "n/a")], ["ended", p.get("ended", "n/a")],
+            ["cluster", ", ".join(f"{k} {v}" for k, v in cl.items())],
+            *[[f"setting {k}", json.dumps(v)] for k, v in settings.items()]]
+    if not settings:
+        rows.append(["settings", "all defaults"])
+    return _table("provenance", ["what", "value"], rows)
+
+
 def _files_section(files: Sequence[str]) -> str:
     if not files:
         return ""
@@ -302,7 +327,8 @@ def render_report(metrics: dict[str, Any], *, statistics: dict[str, Any] | None 
     parts += ["<h2>Spaces</h2>", _spaces_section(metrics), "<h2>Space statistics</h2>", _stats_section(statistics, viewer),
               "<h2>Detection</h2>", _detection_section(metrics), "<h2>Contextual consistency (CRF)</h2>",
               _crf_section(metrics), "<h2>Elements</h2>", _elements_section(metrics),
-              "<h2>Timings</h2>", _timings_section(metrics), "<h2>Dask performance report</h2>"]
+              "<h2>Timings</h2>", _timings_section(metrics), "<h2>Provenance</h2>", _provenance_section(metrics),
+              "<h2>Dask performance report</h2>"]
     if dask_report:
         parts.append(f'<p><a href="{_esc(dask_report)}">{_esc(dask_report)}</a> (task stream, worker profiles)</p>')
     else:

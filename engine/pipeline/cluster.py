@@ -10,7 +10,8 @@ Either way, the thread pools that libraries start on their own inside a worker
 (the LAZ decoder's, Zarr's codec pool, Blosc's) are pinned to the worker's
 thread count (:class:`LibraryThreads`), as dask advises: a single-threaded
 worker then uses one core, and two workers on two cores do not oversubscribe
-them.
+them.  :func:`performance_report` writes dask's report of a block with its
+scripts inline (readable offline).
 """
 from __future__ import annotations
 
@@ -194,3 +195,30 @@ def check_reachable(client: Client | None, *locations: str) -> None:
             raise UserError(loc, "a local path cannot be read by the workers of the remote cluster "
                                  f"{client.scheduler.address}: use an fsspec URL (s3://, gs://...) or, if the "
                                  "workers share this file system, set buildingparser.shared-filesystem: true")
+
+
+@contextlib.contextmanager
+def performance_report(client, path: str):
+    """dask's performance report of the block into ``path`` (when there is a cluster and bokeh).
+
+    Bokeh's scripts are inlined (``mode="inline"``), so the page shows its plots
+    offline (dask's default loads them from a CDN).  The report is a by-product:
+    if dask cannot write it (no bokeh on the scheduler, a lost connection), the
+    run goes on and logs a warning.
+    """
+    import importlib.util
+
+    if client is None or importlib.util.find_spec("bokeh") is None:
+        yield
+        return
+    from distributed import performance_report as pr
+
+    report = pr(filename=path, mode="inline")
+    report.__enter__()
+    try:
+        yield
+    finally:
+        try:
+            report.__exit__(None, None, None)
+        except Exception as exc:  # noqa: BLE001 - never lose a run for its performance report
+            logger.warning("dask performance report not written: %s: %s", type(exc).__name__, exc)

@@ -116,25 +116,27 @@ def compute_metrics(store: TileStore, input: str, parsed, final, proposals, elem
 
 
 def write_plan_outputs(store: TileStore, final, elements, staging: str, client) -> dict[str, Any]:
-    """``spaces.geojson``, ``elements.json``, the floor plan (``floorplan.png``, ``floorplan.svg``), the
-    building model (``building.ifc``) and the 3D view (``viewer.html``) into ``staging``; returns the space
-    statistics."""
+    """``spaces.geojson``, ``spaces.gpkg``, ``elements.json``, the floor plan (``floorplan.png``,
+    ``floorplan.svg``), the building model (``building.ifc``) and the 3D view (``viewer.html``) into ``staging``;
+    returns the space statistics."""
     from engine.outputs.daylight import add_daylight_to_geojson, daylight
-    from engine.outputs.geojson import spaces_feature_collection
+    from engine.outputs.geojson import spaces_feature_collection, write_spaces_gpkg
     from engine.outputs.labels import element_records, write_elements_json
     from engine.outputs.plan import draw_plan
     from engine.outputs.statistics import add_statistics_to_geojson, space_statistics
+    from tiles.crs import parse_crs
 
-    crs = (store.meta.crs or {}).get("wkt")
+    crs = parse_crs(store.meta.crs)
     geo = spaces_feature_collection(final, crs)
     records = element_records(elements, with_voxels=False)
     stats = space_statistics(geo, records)
-    figures = daylight(geo, records, crs)
+    figures = daylight(geo, records, crs.to_wkt() if crs is not None else None)
     layer = json_safe(add_daylight_to_geojson(add_statistics_to_geojson(geo, stats), figures))
     for row in stats["spaces"]:
         row.update(figures.get(int(row["id"]), {}))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
         json.dump(layer, f, allow_nan=False)
+    write_spaces_gpkg(layer, os.path.join(staging, "spaces.gpkg"), crs)
     write_elements_json(elements, os.path.join(staging, "elements.json"))
     draw_plan(layer, records, os.path.join(staging, "floorplan.png"), os.path.join(staging, "floorplan.svg"),
               crs_known=bool(store.meta.crs))
@@ -208,8 +210,8 @@ def summary_lines(metrics: dict[str, Any], out: str) -> list[str]:
                      f"{pct(d['map_before_crf'])}{ranked}; point mIoU {pct(d['miou'])}")
         lines.append("AP per class: " + ", ".join(f"{k} {pct(v)}" for k, v in d["ap"].items()))
     lines.append("elements: " + (", ".join(f"{k} {v}" for k, v in metrics.get("elements", {}).items()) or "none"))
-    names = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "building.ifc", "viewer.html",
-             "elements.json", "metrics.json", "report.html")
+    names = ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
+             "viewer.html", "elements.json", "metrics.json", "report.html")
     off = {"points.laz": not metrics.get("points_written", True), "building.ifc": not setting("outputs.ifc"),
            "viewer.html": not setting("outputs.viewer")}
     written = [n for n in names if not off.get(n)]

@@ -5,8 +5,10 @@
 
 =================  ==================================================================
 ``points.laz``     every input point in input order with its input dimensions, plus
-                   ``classification``, ``space_id``, ``element_id`` (:mod:`tiles.export`)
-``spaces.geojson`` one feature per space, world coordinates, with the space statistics
+                   ``classification`` (64 + code), ``element_class``, ``space_id``, ``element_id``
+                   (:mod:`tiles.export`)
+``spaces.geojson`` one feature per space, world coordinates, with the space statistics (CRS member GDAL reads)
+``spaces.gpkg``    the same as a GeoPackage with its CRS (:mod:`engine.outputs.geojson`)
 ``floorplan.png``  the plan per storey (and ``floorplan.svg``): spaces, walls, doors, windows (:mod:`engine.outputs.plan`)
 ``elements.json``  the detected elements after the CRF (:mod:`engine.detection.proposals`)
 ``metrics.json``   counts, ARI and AP when the input has ground truth, timings (:mod:`engine.outputs.report`)
@@ -28,8 +30,8 @@ import tempfile
 from typing import Any
 
 from engine.config import validate_settings
-from engine.pipeline.cluster import pin_library_threads
-from engine.pipeline.context import RunContext, RunSettings
+from engine.pipeline.cluster import performance_report, pin_library_threads
+from engine.pipeline.context import RunContext, RunSettings, check_run_inputs
 from engine.pipeline.documents import (
     ELEMENTS_DOC,
     PROPOSALS_DOC,
@@ -40,6 +42,7 @@ from engine.pipeline.documents import (
     save_proposals,
     space_lookup,
 )
+from engine.pipeline.provenance import Provenance
 from engine.pipeline.results import (
     all_timings,
     compute_metrics,
@@ -55,6 +58,7 @@ from engine.pipeline.stages import StageLog, StageRecord, Timer, fingerprint
 from tiles import paths
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
+from tiles.export_layout import LAYOUT_VERSION
 from tiles.store import TileStore, open_store
 from tiles.tasks import quiet_progress
 
@@ -84,14 +88,17 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
     """
     validate_settings()  # every buildingparser.* setting, before any work starts
     opt = options or RunSettings()
+    check_run_inputs(input, opt)  # before any folder is made
     out = paths.normalize(out)
     _check_out(out)
     pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
     withdraw_report(out, opt.storage_options)
+    provenance = Provenance(input, storage_options=opt.storage_options, is_store=is_store(input, opt.storage_options))
     staging = tempfile.mkdtemp(prefix="buildingparser-run-")
     try:
         with performance_report(client, os.path.join(staging, "dask-report.html")):
             metrics, stats = _compute(input, out, client, opt, staging)
+        metrics["provenance"] = provenance.finish(model_path=opt.model, options=opt, client=client)
         write_metrics_outputs(metrics, stats, staging)
         publish(staging, out, opt.storage_options)
         return metrics
@@ -126,7 +133,8 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
     # points.laz is written while the metrics and the small outputs are computed: those need the labels, not
     # the file, and their tasks and driver work fill the export's idle moments (its two task batches' ends).
     store.refresh()
-    fp_export = fingerprint("export", paths.join(ctx.out, "points.laz"), fp_labels, fp_update)
+    fp_export = fingerprint("export", {"path": paths.join(ctx.out, "points.laz"), "layout": LAYOUT_VERSION},
+                            fp_labels, fp_update)
     export_job = _start_export(ctx, fp_export)
     try:
         with quiet_progress(export_job is not None):
@@ -366,28 +374,3 @@ def _check_out(out: str) -> None:
         if os.path.exists(p) and not os.path.isdir(p):
             raise UserError(out, "the output folder is a file")
         os.makedirs(p, exist_ok=True)
-
-
-@contextlib.contextmanager
-def performance_report(client, path: str):
-    """dask's performance report of the block into ``path`` (when there is a cluster and bokeh).
-
-    The report is a by-product: if dask cannot write it (no bokeh on the
-    scheduler, a lost connection), the run goes on and logs a warning.
-    """
-    import importlib.util
-
-    if client is None or importlib.util.find_spec("bokeh") is None:
-        yield
-        return
-    from distributed import performance_report as pr
-
-    report = pr(filename=path)
-    report.__enter__()
-    try:
-        yield
-    finally:
-        try:
-            report.__exit__(None, None, None)
-        except Exception as exc:  # noqa: BLE001 - never lose a run for its performance report
-            logger.warning("dask performance report not written: %s: %s", type(exc).__name__, exc)

@@ -149,3 +149,14 @@ def test_one_base_exception_and_the_old_names():
     assert type(back) is SettingsError and back.line() == err.line() == \
         "setting buildingparser.crf.time-limit = -3: must be a number > 0"
     assert pickle.loads(pickle.dumps(UserError("a.laz", "broken"))).line() == "a.laz: broken"
+
+
+def test_non_default_settings_name_only_what_differs_from_the_defaults():
+    from tiles.config import non_default_settings
+
+    base = non_default_settings()
+    assert "tiles.size" not in base
+    with dask.config.set({"buildingparser.tiles.size": "20", "buildingparser.ingest.part-points": 2_000_000,
+                          "buildingparser.export.window": 3}):
+        got = non_default_settings()
+    assert got == {**base, "tiles.size": 20.0, "export.window": 3}  # a default set again is no difference

@@ -9,6 +9,7 @@ import laspy
 import numpy as np
 import pytest
 
+from tiles.classes import CLASS_NAMES
 from tiles.errors import UserError
 from tiles.export import export, gather_points, plan_layout
 from tiles.ingest import ingest
@@ -93,7 +94,15 @@ def test_results_are_exported_and_the_source_classification_kept(tmp_path):
     export(store, str(tmp_path / "out.laz"))
     out = laspy.read(str(tmp_path / "out.laz"))
     i = np.arange(len(las.points))
-    np.testing.assert_array_equal(np.asarray(out.classification), i % 13)
+    assert out.point_format.id == 7  # the source's format 3 raised to its LAS 1.4 twin: 64-76 need 8 bits
+    np.testing.assert_array_equal(np.asarray(out.classification), 64 + i % 13)
+    np.testing.assert_array_equal(out.points.array["element_class"], i % 13)
+    assert out.points.array.dtype["element_class"] == np.uint8
+    lookup = out.header.vlrs.get("ClassificationLookupVlr")
+    assert len(lookup) == 1 and len(lookup[0].record_data_bytes()) == 256 * 16
+    assert (lookup[0].user_id, lookup[0].record_id) == ("LASF_Spec", 0)
+    assert {k: v for k, v in lookup[0].lookups.items() if v} == {64 + c: n for c, n in enumerate(CLASS_NAMES)}
+    np.testing.assert_array_equal(np.asarray(out.scan_angle), np.round(np.asarray(las.scan_angle_rank) / 0.006))
     np.testing.assert_array_equal(out.points.array["source_classification"], np.asarray(las.classification))
     np.testing.assert_array_equal(out.points.array["space_id"], i // 1000)
     np.testing.assert_array_equal(out.points.array["element_id"], np.where(i % 7 == 0, -1, i))
@@ -171,9 +180,32 @@ def test_classification_result_too_wide_for_a_legacy_format_is_refused(tmp_path)
         store.write_array(t, "classification", np.full(t.count, 40, np.uint8))
     store.add_dimensions([Dimension("classification", "uint8", "result")])
     with pytest.raises(UserError, match="do not fit"):
-        export(store, str(tmp_path / "out.las"))
+        export(store, str(tmp_path / "out.las"), point_format=3)
+    assert not (tmp_path / "out.las").exists()
     export(store, str(tmp_path / "out6.las"), point_format=6)
-    assert np.all(np.asarray(laspy.read(str(tmp_path / "out6.las")).classification) == 40)
+    assert np.all(np.asarray(laspy.read(str(tmp_path / "out6.las")).classification) == 64 + 40)
+
+
+def test_a_source_lookup_vlr_gives_way_to_ours_and_stores_without_results_keep_their_classes(tmp_path):
+    from laspy.vlrs.known import ClassificationLookupVlr
+
+    las = _las_with_classes(tmp_path / "in.las", n=300, fmt=7)
+    theirs = ClassificationLookupVlr()
+    theirs[2] = "ground"
+    las.header.vlrs.append(theirs)
+    las.write(str(tmp_path / "in.las"))
+    store = ingest([str(tmp_path / "in.las")], str(tmp_path / "s.zarr"))
+    export(store, str(tmp_path / "plain.las"))
+    plain = laspy.read(str(tmp_path / "plain.las"))
+    np.testing.assert_array_equal(np.asarray(plain.classification), np.asarray(las.classification))
+    assert plain.header.vlrs.get("ClassificationLookupVlr")[0].lookups == {2: "ground"}
+    assert "element_class" not in plain.point_format.extra_dimension_names
+    _add_results(store)
+    export(store, str(tmp_path / "out.las"))
+    out = laspy.read(str(tmp_path / "out.las"))
+    lookups = out.header.vlrs.get("ClassificationLookupVlr")
+    assert len(lookups) == 1 and lookups[0].lookups[64] == "ceiling" and lookups[0].lookups[76] == "clutter"
+    np.testing.assert_array_equal(out.points.array["source_classification"], np.asarray(las.classification))
 
 
 def _reference_bytes(store, path, compress):

@@ -22,6 +22,7 @@ import numpy as np
 from tiles import paths, scratch
 from tiles.builder import StoreBuilder
 from tiles.config import setting
+from tiles.crs import same_crs
 from tiles.errors import UserError
 from tiles.ingest.files import is_dir
 from tiles.ingest.reader import Quantization, Reader, complete_columns, offset_near, union_dimensions
@@ -97,10 +98,24 @@ def precheck(sources: Sequence[str], store: str, *, overwrite: bool = False,
         path = paths.normalize(src)
         if path == store:
             raise UserError(store, "the store cannot be one of the inputs")
-        if not paths.exists(path, storage_options):
-            raise UserError(path, "no such file or folder")
+        check_source(path, storage_options)
     if paths.exists(store, storage_options) and not overwrite:
         raise UserError(store, "already exists: choose another name or pass --overwrite")
+
+
+def check_source(src: str, storage_options: dict[str, Any] | None = None) -> None:
+    """Cheap checks of one input before any cluster starts: it exists, and a file has a known extension
+    (a folder is an S3DIS area or folder of areas, looked into by the ingest itself)."""
+    from tiles.ingest.e57 import EXTENSIONS as E57_EXT
+    from tiles.ingest.text import EXTENSIONS as TEXT_EXT
+
+    path = paths.normalize(src)
+    if not paths.exists(path, storage_options):
+        raise UserError(path, "no such file or folder")
+    ext = os.path.splitext(path.lower())[1]
+    if not is_dir(path, storage_options) and ext not in LAS_EXTENSIONS + TEXT_EXT + E57_EXT:
+        raise UserError(path, f"unknown extension {ext or '(none)'!r}: expected .las, .laz, "
+                              + ", ".join(TEXT_EXT + E57_EXT) + " or an S3DIS folder")
 
 
 def choose_grid(readers: list[Reader]) -> Quantization:
@@ -119,7 +134,8 @@ def choose_grid(readers: list[Reader]) -> Quantization:
 
 
 def merged_crs(readers: list[Reader]) -> dict[str, Any] | None:
-    """The one CRS of all sources (sources without a CRS do not count); a clear error if two differ."""
+    """The one CRS of all sources (sources without a CRS do not count); a clear error if two differ
+    (compared through pyproj: the same CRS as WKT in one file and GeoTIFF keys in another is one CRS)."""
     crs, first = None, None
     for r in readers:
         c = r.crs()
@@ -127,14 +143,10 @@ def merged_crs(readers: list[Reader]) -> dict[str, Any] | None:
             continue
         if crs is None:
             crs, first = c, r
-        elif _crs_key(c) != _crs_key(crs):
+        elif not same_crs(c, crs):
             raise UserError(r.path, f"its coordinate reference system differs from the one of {first.path}: "
                                     "reproject to one CRS first")
     return crs
-
-
-def _crs_key(c: dict[str, Any]):
-    return (c.get("wkt"), c.get("epsg"), str((c.get("geotiff") or {}).get("keys")))
 
 
 def merged_las(readers: list[Reader], dims) -> dict[str, Any] | None:

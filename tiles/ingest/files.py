@@ -16,6 +16,7 @@ def open_binary(path: str, storage_options: dict[str, Any] | None = None) -> Bin
     """A seekable binary file object for a local path or an fsspec URL."""
     if paths.is_local(path):
         return open(paths.local_path(path), "rb")  # noqa: SIM115 - caller closes
+    paths.require_protocol(path)
     return fsspec.open(path, "rb", **(storage_options or {})).open()
 
 

@@ -196,3 +196,22 @@ def test_write_report_is_self_contained(tmp_path):
     assert num(row["window/wall"]) == pytest.approx(1.2 / 12, abs=5e-4)
     with pytest.raises(FileNotFoundError):
         write_report(tmp_path / "nope", metrics=METRICS)
+
+
+def test_provenance_is_shown():
+    prov = {"package": "buildingparser", "version": "0.1.0", "git": {"commit": "ab" * 20, "dirty": True},
+            "model": {"name": "default", "default": True, "path": "/m/default",
+                      "sha256": {"default.npz": "f" * 64, "default.json": "e" * 64}},
+            "settings": {"buildingparser": {"tiles.size": 20.0}, "run": {"crf": False}},
+            "input": {"name": "scan<1>.laz", "size": 123456, "sha256": "d" * 64},
+            "started": "2026-12-03T07:00:00+00:00", "ended": "2026-12-03T07:05:00+00:00",
+            "cluster": {"kind": "dask distributed", "workers": 2}}
+    page = render_report({**METRICS, "provenance": prov})
+    t = rows(parse(page).tables["provenance"])
+    assert t["package"] == ["buildingparser 0.1.0"] and t["git commit"] == ["ab" * 20 + " (uncommitted changes)"]
+    assert t["model"] == ["default (shipped default)"] and t["model sha256: default.npz"] == ["f" * 64]
+    assert t["input"] == ["scan<1>.laz, 123,456 bytes"] and t["input sha256"] == ["d" * 64]
+    assert t["started"] == ["2026-12-03T07:00:00+00:00"] and t["ended"] == ["2026-12-03T07:05:00+00:00"]
+    assert t["setting buildingparser.tiles.size"] == ["20.0"] and t["setting run: crf"] == ["false"]
+    assert "scan&lt;1&gt;.laz" in page
+    assert "No provenance recorded" in render_report(METRICS)

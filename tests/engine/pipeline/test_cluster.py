@@ -176,6 +176,24 @@ def test_embedded_cluster_and_run_pin_library_pools(tmp_path, monkeypatch):
     seen = []
     monkeypatch.setattr(pipeline, "pin_library_threads", seen.append)
     monkeypatch.setattr(pipeline, "withdraw_report", lambda out, options: (_ for _ in ()).throw(RuntimeError("stop")))
+    (tmp_path / "in.laz").write_bytes(b"")  # the input must exist: it is checked first
     with pytest.raises(RuntimeError, match="stop"):
         pipeline.run(str(tmp_path / "in.laz"), str(tmp_path / "out"), client="a client")
     assert seen == ["a client"]
+
+
+def test_performance_report_reads_offline(client, tmp_path):
+    import re
+
+    path = tmp_path / "dask-report.html"
+    with cluster.performance_report(client, str(path)):
+        client.submit(sum, [1, 2, 3]).result()
+    page = path.read_text()
+    assert "Dask Performance Report" in page
+    # no script or stylesheet fetched from elsewhere (dask's default: bokeh from cdn.bokeh.org)
+    assert not re.search(r"<script[^>]+src=[\"']https?://", page)
+    assert not re.search(r"<link[^>]+stylesheet[^>]+href=[\"']https?://", page)
+    assert "cdn.bokeh.org" not in page and len(page) > 500_000  # bokeh's own code is in the page
+    with cluster.performance_report(None, str(tmp_path / "none.html")):
+        pass
+    assert not (tmp_path / "none.html").exists()

@@ -19,8 +19,8 @@ from tests.engine.pipeline.logged import logged
 from tiles.store import open_store
 from tiles.tasks import TaskFailures
 
-OUTPUTS = ("points.laz", "spaces.geojson", "floorplan.png", "floorplan.svg", "building.ifc", "viewer.html",
-           "elements.json", "metrics.json", "report.html")
+OUTPUTS = ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
+           "viewer.html", "elements.json", "metrics.json", "report.html")
 
 
 @pytest.fixture(scope="module")
@@ -54,10 +54,22 @@ def test_run_writes_every_output_and_keeps_every_point_in_order(building, first_
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     src = _laz_dims(laz, "X", "Y", "Z", "red", "gt_space")
     res = _laz_dims(out / "points.laz", "X", "Y", "Z", "red", "gt_space", "classification", "space_id",
-                    "element_id")
+                    "element_id", "element_class")
     for n in ("X", "Y", "Z", "red", "gt_space"):
         np.testing.assert_array_equal(src[n], res[n], err_msg=n)
+    # LAS classes in the user-definable range (64 ceiling ... 76 clutter), the S3DIS code beside them
+    assert res["classification"].min() >= 64 and res["classification"].max() <= 76
+    np.testing.assert_array_equal(res["element_class"], res["classification"] - 64)
+    with laspy.open(out / "points.laz") as f:
+        assert f.header.vlrs.get("ClassificationLookupVlr")[0].lookups[66] == "wall"
     assert metrics["input"]["points"] == len(src["X"])
+    import hashlib
+
+    prov = metrics["provenance"]
+    assert prov["input"] == {"name": laz.name, "size": laz.stat().st_size,
+                             "sha256": hashlib.sha256(laz.read_bytes()).hexdigest()}
+    assert prov["model"]["sha256"] and prov["started"] <= prov["ended"] and prov["cluster"]["workers"] >= 1
+    assert "Provenance" in (out / "report.html").read_text()
     # every point inside a space has a space id; labelled points carry the id of an element of elements.json
     assert np.mean(res["space_id"] >= 0) > 0.95
     elements = json.loads((out / "elements.json").read_text())
@@ -237,12 +249,18 @@ def test_cli_run_logs_a_line_per_stage_and_keeps_every_message_in_the_output_fol
     got = capsys.readouterr()
     assert got.err == "" and "ARI" in got.out
     assert "engine.pipeline.run: spaces: " in (out / "buildingparser.log").read_text()  # the file keeps them
-    failed = out.parent / "no-such-input-out"
-    assert main(["run", str(out.parent / "nope.laz"), "--out", str(failed), "--model", model,
+    failed = out.parent / "broken-input-out"
+    broken = out.parent / "broken.laz"  # there, so it passes the checks before the cluster; not a LAS file
+    broken.write_bytes(b"not a LAS file" * 10)
+    assert main(["run", str(broken), "--out", str(failed), "--model", model,
                  "--scheduler", client.scheduler.address]) == 2
     log = (failed / "buildingparser.log").read_text()
-    assert "ERROR" in log and "nope.laz" in log and "Traceback" in log
+    assert "ERROR" in log and "broken.laz" in log and "Traceback" in log
     assert "Traceback" not in capsys.readouterr().err
+    missing = out.parent / "no-such-input-out"  # a missing input is refused before anything is made
+    assert main(["run", str(out.parent / "nope.laz"), "--out", str(missing), "--model", model,
+                 "--scheduler", client.scheduler.address]) == 2
+    assert not missing.exists()
 
 
 def test_killing_a_worker_mid_run_changes_nothing(building, first_run, tmp_path):

@@ -1,0 +1,36 @@
+"""What a run reads is checked before any cluster starts or folder is made."""
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from engine.pipeline.context import RunSettings, check_run_inputs
+from engine.pipeline.run import run
+from tiles.errors import UserError
+
+
+def test_missing_or_unknown_inputs_and_models_are_refused_at_once(tmp_path):
+    t0 = time.perf_counter()
+    with pytest.raises(UserError, match="no such file or folder"):
+        check_run_inputs(str(tmp_path / "nope.laz"), RunSettings())
+    (tmp_path / "scan.ply").write_bytes(b"ply\n")
+    with pytest.raises(UserError, match="unknown extension '.ply'"):
+        check_run_inputs(str(tmp_path / "scan.ply"), RunSettings())
+    (tmp_path / "scan.laz").write_bytes(b"")
+    check_run_inputs(str(tmp_path / "scan.laz"), RunSettings())  # exists, known: the reader looks inside later
+    (tmp_path / "m.npz").write_bytes(b"")
+    with pytest.raises(UserError, match=r"m\.json: no such model file"):
+        check_run_inputs(str(tmp_path / "scan.laz"), RunSettings(model=str(tmp_path / "m.npz")))
+    (tmp_path / "store.zarr").mkdir()
+    (tmp_path / "store.zarr" / "zarr.json").write_text("{}")
+    check_run_inputs(str(tmp_path / "store.zarr"), RunSettings())  # a tile store
+    (tmp_path / "Area_1").mkdir()
+    check_run_inputs(str(tmp_path / "Area_1"), RunSettings())  # a folder: the S3DIS reader looks inside
+    assert time.perf_counter() - t0 < 0.5
+
+
+def test_the_api_refuses_a_missing_input_before_making_the_output_folder(tmp_path):
+    with pytest.raises(UserError, match="no such file or folder"):
+        run(str(tmp_path / "nope.laz"), str(tmp_path / "out"))
+    assert not (tmp_path / "out").exists()
