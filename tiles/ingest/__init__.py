@@ -52,7 +52,7 @@ def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None 
         path = paths.normalize(src)
         ext = os.path.splitext(path.lower())[1]
         if is_dir(path, storage_options):
-            if ext in LAS_EXTENSIONS + TEXT_EXT + E57_EXT + PLY_EXT + PCD_EXT:
+            if ext in file_extensions():
                 raise UserError(path, f"is a directory, expected a {ext} file")
             from tiles.ingest.s3dis import readers_for
 
@@ -81,8 +81,7 @@ def open_sources(sources: Sequence[str], storage_options: dict[str, Any] | None 
         else:
             if not paths.exists(path, storage_options):
                 raise UserError(path, "no such file or folder")
-            raise UserError(path, f"unknown extension {ext or '(none)'!r}: expected .las, .laz, "
-                                  + ", ".join(TEXT_EXT + E57_EXT + PLY_EXT + PCD_EXT) + " or an S3DIS folder")
+            raise unknown_extension(path, ext)
     if not readers:
         raise UserError(None, "no input given")
     return readers
@@ -103,19 +102,31 @@ def precheck(sources: Sequence[str], store: str, *, overwrite: bool = False,
         raise UserError(store, "already exists: choose another name or pass --overwrite")
 
 
+def file_extensions() -> tuple[str, ...]:
+    """The extensions of the point cloud files the readers take (LAS/LAZ, text, E57, PLY, PCD)."""
+    from tiles.ingest.e57 import EXTENSIONS as E57_EXT
+    from tiles.ingest.pcd import EXTENSIONS as PCD_EXT
+    from tiles.ingest.ply import EXTENSIONS as PLY_EXT
+    from tiles.ingest.text import EXTENSIONS as TEXT_EXT
+
+    return LAS_EXTENSIONS + TEXT_EXT + E57_EXT + PLY_EXT + PCD_EXT
+
+
+def unknown_extension(path: str, ext: str) -> UserError:
+    """The one-line refusal of a file whose extension no reader takes."""
+    return UserError(path, f"unknown extension {ext or '(none)'!r}: expected " + ", ".join(file_extensions())
+                     + " or an S3DIS folder")
+
+
 def check_source(src: str, storage_options: dict[str, Any] | None = None) -> None:
     """Cheap checks of one input before any cluster starts: it exists, and a file has a known extension
     (a folder is an S3DIS area or folder of areas, looked into by the ingest itself)."""
-    from tiles.ingest.e57 import EXTENSIONS as E57_EXT
-    from tiles.ingest.text import EXTENSIONS as TEXT_EXT
-
     path = paths.normalize(src)
     if not paths.exists(path, storage_options):
         raise UserError(path, "no such file or folder")
     ext = os.path.splitext(path.lower())[1]
-    if not is_dir(path, storage_options) and ext not in LAS_EXTENSIONS + TEXT_EXT + E57_EXT:
-        raise UserError(path, f"unknown extension {ext or '(none)'!r}: expected .las, .laz, "
-                              + ", ".join(TEXT_EXT + E57_EXT) + " or an S3DIS folder")
+    if not is_dir(path, storage_options) and ext not in file_extensions():
+        raise unknown_extension(path, ext)
 
 
 def choose_grid(readers: list[Reader]) -> Quantization:
