@@ -137,10 +137,10 @@ def test_not_a_las_file(capsys, tmp_path, sched):
 
 
 def test_unknown_extension(capsys, tmp_path, sched):
-    src = tmp_path / "cloud.ply"
-    src.write_text("ply\n")
+    src = tmp_path / "cloud.obj"
+    src.write_text("v 0 0 0\n")
     _refused(capsys, tmp_path, ["ingest", str(src), str(tmp_path / "s.zarr"), *sched], src,
-             "unknown extension '.ply'")
+             "unknown extension '.obj'")
     store = _ingested(tmp_path, sched, capsys)
     _refused(capsys, tmp_path, ["export", str(store), str(tmp_path / "out.ply"), *sched], tmp_path / "out.ply",
              "unknown extension '.ply'")

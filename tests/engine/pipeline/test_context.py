@@ -14,9 +14,9 @@ def test_missing_or_unknown_inputs_and_models_are_refused_at_once(tmp_path):
     t0 = time.perf_counter()
     with pytest.raises(UserError, match="no such file or folder"):
         check_run_inputs(str(tmp_path / "nope.laz"), RunSettings())
-    (tmp_path / "scan.ply").write_bytes(b"ply\n")
-    with pytest.raises(UserError, match="unknown extension '.ply'"):
-        check_run_inputs(str(tmp_path / "scan.ply"), RunSettings())
+    (tmp_path / "scan.obj").write_bytes(b"v 0 0 0\n")
+    with pytest.raises(UserError, match="unknown extension '.obj'"):
+        check_run_inputs(str(tmp_path / "scan.obj"), RunSettings())
     (tmp_path / "scan.laz").write_bytes(b"")
     check_run_inputs(str(tmp_path / "scan.laz"), RunSettings())  # exists, known: the reader looks inside later
     (tmp_path / "m.npz").write_bytes(b"")
