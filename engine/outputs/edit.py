@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from engine.outputs.runfolder import read_run_outputs
 from tiles.errors import UserError
 
 SEAM_DISTANCE = 0.30
@@ -47,13 +48,7 @@ IN_WALL = ("door", "window")
 
 
 def _load(run: str) -> tuple[dict[str, Any], list[dict[str, Any]], dict[str, Any]]:
-    for name in ("spaces.geojson", "elements.json", "points.laz"):
-        if not os.path.isfile(os.path.join(run, name)):
-            raise UserError(run, f"not a finished run folder: no {name}")
-    with open(os.path.join(run, "spaces.geojson")) as f:
-        layer = json.load(f)
-    with open(os.path.join(run, "elements.json")) as f:
-        elements = json.load(f)
+    layer, elements = read_run_outputs(run, need=("points.laz",))
     metrics = {}
     if os.path.isfile(os.path.join(run, "metrics.json")):
         with open(os.path.join(run, "metrics.json")) as f:

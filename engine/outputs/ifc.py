@@ -33,14 +33,11 @@ The file is written to a temporary name and renamed.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from typing import Any
 
 import numpy as np
-
-from tiles.errors import UserError
 
 IFC_FILE = "building.ifc"
 LOCAL_ROUNDING = 100.0
@@ -253,13 +250,9 @@ def build_model(layer: dict[str, Any], elements: list[dict[str, Any]], *, name: 
 
 def write_ifc(folder: str, *, path: str | None = None) -> str:
     """Write ``building.ifc`` for the run folder ``folder`` (from its spaces.geojson and elements.json)."""
-    for n in ("spaces.geojson", "elements.json"):
-        if not os.path.isfile(os.path.join(folder, n)):
-            raise UserError(folder, f"not a finished run folder: no {n}")
-    with open(os.path.join(folder, "spaces.geojson")) as f:
-        layer = json.load(f)
-    with open(os.path.join(folder, "elements.json")) as f:
-        elements = json.load(f)
+    from engine.outputs.runfolder import read_run_outputs
+
+    layer, elements = read_run_outputs(folder)
     model = build_model(layer, elements, name=os.path.basename(os.path.normpath(folder)) or "buildingparser")
     path = path or os.path.join(folder, IFC_FILE)
     tmp = path + ".tmp.ifc"

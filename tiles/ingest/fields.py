@@ -21,12 +21,13 @@ value (``name_0``, ``name_1``, ...).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import laspy
 import numpy as np
 
 from tiles.errors import UserError
-from tiles.ingest.reader import PartResult, Quantization, safe_name
+from tiles.ingest.reader import PartResult, Quantization, Reader, safe_name
 from tiles.ingest.text import color_dimensions
 from tiles.schema import Dimension, coordinate_dimensions
 
@@ -134,3 +135,21 @@ def field_map(dtype: np.dtype, path: str) -> FieldMap:
             taken.add(name)
             extras.append((n, name, None))
     return FieldMap(xyz, colour, packed, tuple(extras), intensity)  # type: ignore[arg-type]
+
+
+class RecordReader(Reader):
+    """A file of point records read by row ranges: ``(start, stop, part_points)`` specs, one task per
+    ``part_points`` rows when the rows can be entered anywhere (``self.mapped``: a memory-mapped binary file),
+    else one task for the whole file that cuts it into parts.  Subclasses set ``count`` and ``mapped``."""
+
+    count: int
+    mapped: bool = False
+
+    def plan(self, part_points: int) -> list[Any]:
+        if self.mapped:
+            return [(a, min(a + part_points, self.count), part_points) for a in range(0, self.count, part_points)]
+        return [(0, self.count, part_points)]
+
+    def parts_of(self, spec: Any) -> int:
+        start, stop, part_points = spec
+        return -(-(stop - start) // part_points)

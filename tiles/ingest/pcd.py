@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 
 from tiles.errors import UserError
-from tiles.ingest.fields import FieldMap, field_map
+from tiles.ingest.fields import FieldMap, RecordReader, field_map
 from tiles.ingest.files import check_file, local_copy
-from tiles.ingest.reader import PartResult, Quantization, Reader
+from tiles.ingest.reader import PartResult, Quantization
 from tiles.ingest.text import grid_scale
 
 EXTENSIONS = (".pcd",)
@@ -67,7 +67,7 @@ def _encoding(meta: Any) -> str:
     return str(getattr(meta.data, "value", meta.data)).lower()
 
 
-class PcdReader(Reader):
+class PcdReader(RecordReader):
     """A PCD file."""
 
     format = "pcd"
@@ -79,6 +79,7 @@ class PcdReader(Reader):
         with local_copy(path, storage_options) as local:
             meta, self.data_offset = read_header(local, path)
             self.encoding = _encoding(meta)
+            self.mapped = self.encoding == "binary"  # rows of a binary file are memory-mapped
             self.count = int(meta.points)
             if not self.count:
                 raise UserError(path, "empty point cloud: POINTS 0")
@@ -116,15 +117,6 @@ class PcdReader(Reader):
 
     def first_point(self) -> np.ndarray:
         return self._first
-
-    def plan(self, part_points: int) -> list[Any]:
-        if self.encoding == "binary":
-            return [(a, min(a + part_points, self.count), part_points) for a in range(0, self.count, part_points)]
-        return [(0, self.count, part_points)]
-
-    def parts_of(self, spec: Any) -> int:
-        start, stop, part_points = spec
-        return -(-(stop - start) // part_points)
 
     def read(self, spec: Any, grid: Quantization) -> Iterator[PartResult]:
         start, stop, part_points = spec

@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 
 from tiles.errors import UserError
-from tiles.ingest.fields import FieldMap, field_map
+from tiles.ingest.fields import FieldMap, RecordReader, field_map
 from tiles.ingest.files import check_file, local_copy
-from tiles.ingest.reader import PartResult, Quantization, Reader
+from tiles.ingest.reader import PartResult, Quantization
 from tiles.ingest.text import grid_scale
 
 EXTENSIONS = (".ply",)
@@ -48,7 +48,7 @@ def _vertices(local: str, path: str) -> tuple[Any, Any]:
     return data, data["vertex"]
 
 
-class PlyReader(Reader):
+class PlyReader(RecordReader):
     """A PLY file: its vertices are the points."""
 
     format = "ply"
@@ -79,15 +79,6 @@ class PlyReader(Reader):
 
     def native_grid(self) -> Quantization | None:
         return None
-
-    def plan(self, part_points: int) -> list[Any]:
-        if self.mapped:
-            return [(a, min(a + part_points, self.count), part_points) for a in range(0, self.count, part_points)]
-        return [(0, self.count, part_points)]
-
-    def parts_of(self, spec: Any) -> int:
-        start, stop, part_points = spec
-        return -(-(stop - start) // part_points)
 
     def read(self, spec: Any, grid: Quantization) -> Iterator[PartResult]:
         start, stop, part_points = spec
