@@ -142,6 +142,11 @@ def run_log(out: str, storage_options: dict[str, Any] | None = None) -> Iterator
                 raise
     finally:
         handler.close()
+        if local:
+            from engine.pipeline.outfolder import record_written
+
+            with contextlib.suppress(OSError):
+                record_written(out, [LOG_FILE])
         if tmpdir is not None:
             with contextlib.suppress(Exception):  # the log is a by-product: never lose a run for it
                 fs, root = paths.filesystem(out, storage_options)

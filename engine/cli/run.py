@@ -51,6 +51,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.cli.logs import run_log
     from engine.pipeline.cluster import check_reachable, cluster_client
+    from engine.pipeline.outfolder import claim_output_folder
     from engine.pipeline.results import summary_lines
     from engine.pipeline.run import RunSettings
     from engine.pipeline.run import run as run_pipeline
@@ -58,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     options = RunSettings(model=args.model, store=args.store, force=args.force, crf=not args.no_crf,
                          update=not args.no_update, export_points=not args.no_points, tile_size=args.tile_size,
                          storage_options=args.storage_options)
-    with run_log(args.out, args.storage_options):
+    # the output folder first: unwritable, taken by another run or holding the user's files -> one line, no work
+    with claim_output_folder(args.out, force=args.force), run_log(args.out, args.storage_options):
         logger.debug("run %s --out %s: %s", args.input, args.out, options)
         with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
             check_reachable(client, args.input, args.out, args.store)
