@@ -32,6 +32,7 @@ from typing import Any
 
 from tiles import paths
 from tiles.errors import UserError
+from tiles.leftovers import remove_dead_temporary_folders, remove_scratch_of_killed_runs
 
 logger = logging.getLogger(__name__)
 
@@ -69,6 +70,8 @@ def claim_output_folder(out: str, *, force: bool = False) -> Iterator[None]:
         if foreign and not force:
             raise UserError(folder, f"holds {', '.join(foreign)} not written by buildingparser: "
                                     "pass --force to overwrite, or choose another --out")
+        remove_scratch_of_killed_runs(folder)  # no other run can be writing here while we hold the lock
+        remove_dead_temporary_folders()
         if foreign:
             logger.warning("%s: %s (not written by buildingparser) will be overwritten, as --force asks",
                            folder, ", ".join(foreign))

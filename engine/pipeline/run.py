@@ -24,7 +24,6 @@ import hashlib
 import logging
 import os
 import shutil
-import tempfile
 from typing import Any
 
 from engine.config import validate_settings
@@ -57,6 +56,7 @@ from engine.pipeline.stages import StageLog, StageRecord, Timer, fingerprint
 from tiles import paths
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
+from tiles.leftovers import temporary_folder
 from tiles.store import TileStore, open_store
 from tiles.tasks import quiet_progress
 
@@ -89,7 +89,7 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
     out = paths.normalize(out)
     with claim_output_folder(out, force=opt.force):  # one line and nothing touched if it is not ours to write
         pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
-        staging = tempfile.mkdtemp(prefix="buildingparser-run-")
+        staging = temporary_folder("run")
         try:
             with performance_report(client, os.path.join(staging, "dask-report.html")):
                 metrics, stats = _compute(input, out, client, opt, staging)

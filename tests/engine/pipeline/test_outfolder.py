@@ -131,3 +131,11 @@ def test_a_read_only_folder_is_refused(tmp_path):
                 pass
     finally:
         out.chmod(0o755)
+
+
+def test_claiming_removes_the_scratch_of_killed_runs(tmp_path):
+    out = tmp_path / "out"
+    (out / ".store.zarr.export-1a2b3c4d").mkdir(parents=True)
+    (out / "mine.txt").write_text("kept")
+    with claim_output_folder(str(out)):
+        assert sorted(os.listdir(out)) == [LOCK_FILE, "mine.txt"]
