@@ -196,3 +196,14 @@ def test_write_report_is_self_contained(tmp_path):
     assert num(row["window/wall"]) == pytest.approx(1.2 / 12, abs=5e-4)
     with pytest.raises(FileNotFoundError):
         write_report(tmp_path / "nope", metrics=METRICS)
+
+
+def test_a_path_that_is_not_utf8_is_shown_escaped(tmp_path):
+    import os
+
+    raw = os.fsdecode(b"/data/caf\xe9 scan/r\xc3\xa9sum\xff.laz")  # latin-1 bytes, then UTF-8, then a stray byte
+    metrics = dict(METRICS, input=dict(METRICS["input"], path=raw))
+    (tmp_path / "metrics.json").write_text(json.dumps(metrics))
+    path = write_report(tmp_path, metrics=json.loads((tmp_path / "metrics.json").read_text()))
+    page = open(path, encoding="utf-8").read()  # valid UTF-8
+    assert "/data/caf\\xe9 scan/résum\\xff.laz" in page and "résum\\xff.laz" in page.split("<title>")[1]
