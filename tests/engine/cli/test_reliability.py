@@ -126,3 +126,20 @@ def test_a_model_with_a_bad_value_is_one_line(tmp_path, capsys, client):
     line = _error_line(capsys.readouterr().err)
     assert rc == 2 and "m.json: model field voxel = -1: must be a finite number of metres > 0" in line
     assert not (tmp_path / "out" / "store.zarr").exists()  # refused before the ingest
+
+
+def test_a_path_that_is_not_utf8_works_end_to_end_and_a_rerun_owns_its_outputs(tmp_path, capsys, client):
+    from engine.synth import generate
+
+    folder = os.path.join(os.fsencode(tmp_path), b"caf\xe9 scan")  # latin-1: not UTF-8
+    os.makedirs(folder)
+    laz = os.fsdecode(os.path.join(folder, b"b\xff.laz"))
+    generate(laz, seed=5, rooms=2, density=800, format="laz")
+    out = os.fsdecode(os.path.join(folder, b"out"))
+    args = ["run", laz, "--out", out, "--scheduler", client.scheduler.address]
+    assert main(args) == 0, capsys.readouterr().err
+    page = open(os.path.join(out, "report.html"), encoding="utf-8").read()
+    assert "caf\\xe9 scan/b\\xff.laz" in page
+    capsys.readouterr()
+    assert main(args) == 0, capsys.readouterr().err  # its own outputs (and log) are not the user's files
+    assert "not written by buildingparser" not in capsys.readouterr().err
