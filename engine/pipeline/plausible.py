@@ -1,7 +1,7 @@
 """Refuse up front, in one line, a cloud the parse cannot represent or that cannot be a building interior.
 
-Checked on the store's metadata right after ingest, before any task of the
-parse (spaces, detection) starts:
+Checked by ingest on what its tasks read, before it writes the tiles, and on
+the metadata of a store given as input, before any task of the parse starts:
 
 * every coordinate is finite and the extent is not zero along any axis: the
   spaces stage needs a floor and a ceiling (a z extent) and a floor plan (an
@@ -22,6 +22,7 @@ import math
 
 from tiles.config import setting
 from tiles.errors import UserError
+from tiles.ingest import CloudFacts
 from tiles.store import TileStore
 
 
@@ -31,19 +32,24 @@ def check_parsable(store: TileStore, source: str) -> None:
     b = [float(v) for v in m.bounds]
     if not all(math.isfinite(v) for v in b):
         raise UserError(source, f"non-finite coordinate bounds {b}")
-    extent = [b[3] - b[0], b[4] - b[1], b[5] - b[2]]
+    check_cloud(CloudFacts(m.point_count, len(m.tiles), float(m.tile_size), (b[3] - b[0], b[4] - b[1], b[5] - b[2])),
+                source)
+
+
+def check_cloud(facts: CloudFacts, source: str) -> None:
+    """The checks of the module on what ingest found (called by ingest before it writes the tiles)."""
+    n, extent = facts.points, facts.extent
     if extent[2] <= 0:
-        raise UserError(source, f"all {m.point_count:,} points lie at one height z = {b[2]:g} m: "
-                                "no floor and ceiling to parse")
+        raise UserError(source, f"all {n:,} points lie at one height: no floor and ceiling to parse")
     if extent[0] <= 0 or extent[1] <= 0:
         axis = "x" if extent[0] <= 0 else "y"
-        raise UserError(source, f"all {m.point_count:,} points lie in one vertical plane ({axis} extent 0): "
+        raise UserError(source, f"all {n:,} points lie in one vertical plane ({axis} extent 0): "
                                 "no floor plan to parse")
     pixel = float(setting("spaces.ridges.occupancy-pixel"))
-    footprint = len(m.tiles) * float(m.tile_size) ** 2
-    density = m.point_count / footprint if footprint > 0 else math.inf
+    footprint = facts.tiles * facts.tile_size ** 2
+    density = n / footprint if footprint > 0 else math.inf
     if density * pixel * pixel < 1.0:
-        raise UserError(source, f"too sparse to be a building interior: {m.point_count:,} points over "
+        raise UserError(source, f"too sparse to be a building interior: {n:,} points over "
                                 f"{extent[0]:,.1f} x {extent[1]:,.1f} x {extent[2]:,.1f} m, {density:.3g} points "
-                                f"per m2 of the {len(m.tiles):,} occupied {m.tile_size:g} m tiles; a wall needs at "
+                                f"per m2 of the {facts.tiles:,} occupied {facts.tile_size:g} m tiles; a wall needs at "
                                 f"least {1 / pixel ** 2:g} per m2 (one per {pixel:g} m occupancy pixel)")

@@ -40,7 +40,7 @@ from engine.pipeline.documents import (
     space_lookup,
 )
 from engine.pipeline.outfolder import claim_output_folder, record_written
-from engine.pipeline.plausible import check_parsable
+from engine.pipeline.plausible import check_cloud, check_parsable
 from engine.pipeline.results import (
     all_timings,
     compute_metrics,
@@ -331,7 +331,7 @@ def _ingest_stage(input: str, out: str, client, opt: RunSettings,
             pass  # unfinished or foreign: ingest again
     with Timer() as t:
         store = ingest([input], url, client=client, overwrite=True, tile_size=opt.tile_size,
-                       storage_options=opt.storage_options)
+                       storage_options=opt.storage_options, accept=lambda facts: check_cloud(facts, input))
     timings["ingest"] = t.seconds
     StageLog(store).write(StageRecord("ingest", fp, "ok", t.seconds, outputs={"points": store.meta.point_count}))
     logger.info("ingest: %s points into %s (%.1f s)", f"{store.meta.point_count:,}", url, t.seconds)
