@@ -39,7 +39,8 @@ def temporary_folder(kind: str) -> str:
     return tempfile.mkdtemp(prefix=f"buildingparser-{kind}-{os.getpid()}-")
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """True when process ``pid`` runs on this machine (or may: one of another user)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -59,7 +60,7 @@ def remove_dead_temporary_folders(root: str | None = None) -> list[str]:
         return removed
     for name in names:
         m = _TEMPORARY.match(name)
-        if m and int(m.group(2)) != os.getpid() and not _alive(int(m.group(2))):
+        if m and int(m.group(2)) != os.getpid() and not process_alive(int(m.group(2))):
             shutil.rmtree(os.path.join(root, name), ignore_errors=True)
             removed.append(name)
     if removed:

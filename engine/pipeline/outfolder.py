@@ -32,7 +32,7 @@ from typing import Any
 
 from tiles import paths
 from tiles.errors import UserError
-from tiles.leftovers import remove_dead_temporary_folders, remove_scratch_of_killed_runs
+from tiles.leftovers import process_alive, remove_dead_temporary_folders, remove_scratch_of_killed_runs
 
 logger = logging.getLogger(__name__)
 
@@ -96,16 +96,6 @@ def check_writable(folder: str) -> None:
             from None
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _holder(fd: int) -> dict[str, Any]:
     os.lseek(fd, 0, os.SEEK_SET)
     raw = os.read(fd, 4096)
@@ -146,7 +136,7 @@ def folder_lock(folder: str) -> Iterator[None]:
         raise UserError(folder, f"locked by pid {old['pid']} on host {old['host']} (a run there, or one killed "
                                 f"there): if no run is writing into this folder, remove {path}")
     if old.get("pid") is not None:
-        state = "still running: not a buildingparser run" if _alive(int(old["pid"])) else "no longer running"
+        state = "still running: not a buildingparser run" if process_alive(int(old["pid"])) else "no longer running"
         logger.warning("%s: taking over the lock of a killed run (pid %s, %s)", folder, old["pid"], state)
     os.ftruncate(fd, 0)
     os.lseek(fd, 0, os.SEEK_SET)
