@@ -15,7 +15,6 @@ from __future__ import annotations
 import os
 import shutil
 import struct
-import tempfile
 import time
 import uuid
 from typing import Any
@@ -32,6 +31,7 @@ from tiles.errors import UserError
 from tiles.export_header import build_header, grow_header, set_extra_ranges, tracked_extra_bytes
 from tiles.export_layout import Layout, plan_layout
 from tiles.export_units import UnitJob, ordered_results, scratch_for, stage_tiles, unit_points
+from tiles.leftovers import temporary_folder
 from tiles.store import TileStore
 
 EXTENSIONS = (".las", ".laz")
@@ -128,7 +128,7 @@ def _temporary_file(out: str, ext: str) -> tuple[str, str | None]:
     if paths.is_local(out):
         head, tail = os.path.split(paths.local_path(out))
         return os.path.join(head, f".{tail}.tmp-{uuid.uuid4().hex[:8]}"), None
-    tmpdir = tempfile.mkdtemp(prefix="buildingparser-export-")
+    tmpdir = temporary_folder("export")
     return os.path.join(tmpdir, "out" + ext), tmpdir
 
 

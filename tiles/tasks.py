@@ -15,6 +15,7 @@ import logging
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from tiles.config import setting
@@ -160,6 +161,32 @@ def _run_here(fn: Callable[..., Any], items: list[Any], keys: list[Any], extra_a
         progress.update()
 
 
+@dataclass
+class UserErrorResult:
+    """What a task that found a mistake in the user's input gives back instead of failing."""
+
+    error: UserError
+
+
+class ReturnUserErrors:
+    """A task function whose :class:`UserError` is its result, not its failure.
+
+    A failed task is retried by dask (``buildingparser.retries``) and each try
+    logs an error block with a traceback; a mistake in the input fails the
+    same way every time, so it is returned once and raised by the driver.
+    """
+
+    def __init__(self, fn: Callable[..., Any]):
+        self.fn = fn
+        self.__name__ = getattr(fn, "__name__", "task")  # dask names the task's key after its function
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return self.fn(*args, **kwargs)
+        except UserError as exc:
+            return UserErrorResult(exc)
+
+
 def _run_on_cluster(client, fn: Callable[..., Any], items: list[Any], keys: list[Any], extra_args: tuple,
                     results: list[Any], failures: list[tuple[Any, BaseException]], progress: Progress, *,
                     resources: dict | None, window: int | None, prepare: Callable[[Any], Any] | None) -> None:
@@ -167,6 +194,7 @@ def _run_on_cluster(client, fn: Callable[..., Any], items: list[Any], keys: list
     from distributed import as_completed
 
     retries = setting("retries")
+    fn = ReturnUserErrors(fn)
     if window is None and prepare is None:
         futures = client.map(fn, items, *[[a] * len(items) for a in extra_args], retries=retries,
                              pure=False, resources=resources)
@@ -197,5 +225,8 @@ def _run_on_cluster(client, fn: Callable[..., Any], items: list[Any], keys: list
             results[i] = exc
         else:
             results[i] = fut.result()
+            if isinstance(results[i], UserErrorResult):
+                client.cancel(futures)
+                raise results[i].error
         fut.release()
         progress.update()

@@ -100,6 +100,9 @@ class TileGrid:
             key = kx.astype(np.int64) * ny + ky
         # numpy's stable sort of 16-bit keys is a radix sort: O(n) for parts spanning < 65536 tiles
         order = np.argsort(key, kind="stable")
+        if nx * ny > max(1 << 16, 4 * len(key)):  # sparse: the occupied tiles, not every tile of the extent
+            used, starts, counts = np.unique(key[order], return_index=True, return_counts=True)
+            return TileOrder(order, starts, counts, x0 + used // ny, y0 + used % ny)
         per_key = np.bincount(key, minlength=nx * ny)
         used = np.flatnonzero(per_key)
         counts = per_key[used]

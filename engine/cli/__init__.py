@@ -71,6 +71,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
+    for stream in (sys.stdout, sys.stderr):  # a path need not be UTF-8: print its odd bytes escaped, never fail
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            reconfigure(errors="backslashreplace")
     with console_logging(verbosity(args)):
         try:
             validate_settings()  # every buildingparser.* setting, before any work or cluster starts

@@ -32,14 +32,15 @@ def configure(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.cli.logs import run_log
     from engine.pipeline.cluster import cluster_client
+    from engine.pipeline.outfolder import claim_output_folder
     from engine.pipeline.results import summary_lines
     from engine.pipeline.run import RunSettings
     from engine.pipeline.run import run as run_pipeline
     from engine.synth import generate
 
     out = os.path.abspath(args.out)
-    with run_log(out), cluster_client(args.scheduler, n_workers=args.workers,
-                                      memory_limit=args.memory_limit) as client:
+    with claim_output_folder(out, force=args.force), run_log(out), \
+            cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
         source = args.input
         if source is None:
             source = os.path.join(out, "input", "building.laz")

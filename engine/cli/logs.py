@@ -15,7 +15,6 @@ import logging
 import os
 import shutil
 import sys
-import tempfile
 import warnings
 from collections.abc import Iterator
 from typing import Any
@@ -23,6 +22,7 @@ from typing import Any
 import dask
 
 from tiles import paths
+from tiles.leftovers import temporary_folder
 
 PROG = "buildingparser"
 PACKAGES = ("engine", "tiles")  # the loggers the command line shows
@@ -125,8 +125,9 @@ def run_log(out: str, storage_options: dict[str, Any] | None = None) -> Iterator
             folder = paths.local_path(paths.normalize(out))
             os.makedirs(folder, exist_ok=True)
         else:
-            folder = tmpdir = tempfile.mkdtemp(prefix="buildingparser-log-")
-        handler = logging.FileHandler(os.path.join(folder, LOG_FILE), mode="w", encoding="utf-8")
+            folder = tmpdir = temporary_folder("log")
+        handler = logging.FileHandler(os.path.join(folder, LOG_FILE), mode="w", encoding="utf-8",
+                                      errors="backslashreplace")  # an input path need not be UTF-8
     except OSError:
         yield None  # not a folder we can write into: the run itself reports it
         return
@@ -142,6 +143,11 @@ def run_log(out: str, storage_options: dict[str, Any] | None = None) -> Iterator
                 raise
     finally:
         handler.close()
+        if local:
+            from engine.pipeline.outfolder import record_written
+
+            with contextlib.suppress(OSError):
+                record_written(out, [LOG_FILE])
         if tmpdir is not None:
             with contextlib.suppress(Exception):  # the log is a by-product: never lose a run for it
                 fs, root = paths.filesystem(out, storage_options)

@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from engine.cli.logs import run_log
     from engine.pipeline.cluster import check_reachable, cluster_client
     from engine.pipeline.context import check_run_inputs
+    from engine.pipeline.outfolder import claim_output_folder
     from engine.pipeline.results import summary_lines
     from engine.pipeline.run import RunSettings
     from engine.pipeline.run import run as run_pipeline
@@ -68,7 +69,8 @@ def run(args: argparse.Namespace) -> int:
                          update=not args.no_update, export_points=not args.no_points, tile_size=args.tile_size,
                          storage_options=args.storage_options)
     check_run_inputs(args.input, options)  # a missing input is refused before the cluster starts and DIR is made
-    with run_log(args.out, args.storage_options):
+    # the output folder next: unwritable, taken by another run or holding the user's files -> one line, no work
+    with claim_output_folder(args.out, force=args.force), run_log(args.out, args.storage_options):
         logger.debug("run %s --out %s: %s", args.input, args.out, options)
         with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
             check_reachable(client, args.input, args.out, args.store)
@@ -76,5 +78,6 @@ def run(args: argparse.Namespace) -> int:
                    if no}
             with dask.config.set(off) if off else contextlib.nullcontext():
                 metrics = run_pipeline(args.input, args.out, client=client, options=options)
-    print("\n".join(summary_lines(metrics, args.out)))
+                lines = summary_lines(metrics, args.out)
+    print("\n".join(lines))
     return 0

@@ -10,6 +10,7 @@ The arrays, their shapes and the JSON keys: ``docs/design/detection.md`` (the mo
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from typing import Any
@@ -176,6 +177,7 @@ class Model:
             raise UserError(stem + ".json", f"not a model description ({exc})") from None
         if not isinstance(params, dict) or params.get("format") != FORMAT:
             raise UserError(stem + ".json", f"not a buildingparser detection model (format {FORMAT!r} expected)")
+        _check_params(params, stem + ".json")
         if int(params.get("version", 0)) > VERSION:
             raise UserError(stem + ".json", f"model version {params.get('version')} is newer than this "
                                             f"buildingparser reads ({VERSION}): upgrade buildingparser")
@@ -186,10 +188,16 @@ class Model:
                 arrays = {k: z[k] for k in z.files}
         except (OSError, ValueError) as exc:
             raise UserError(stem + ".npz", f"not a model array file ({exc})") from None
+        for name in ("weights", "bias", "atom_weights", "atom_bias"):
+            a = arrays.get(name)
+            if a is not None and (a.dtype.kind not in "biuf" or not np.isfinite(a).all()):
+                raise UserError(stem + ".npz", f"array {name} must hold finite numbers (it is {a.dtype}"
+                                               + (f" with {int(np.size(a) - np.isfinite(a).sum())} non-finite)"
+                                                  if a.dtype.kind == "f" else ")"))
         try:
             layout = FeatureLayout.from_json(params["layout"])
             dictionary = WindowDictionary.from_arrays(arrays, params["dictionary"])
-            return cls(layout, dictionary, arrays["weights"], arrays["bias"], arrays["trained"],
+            model = cls(layout, dictionary, arrays["weights"], arrays["bias"], arrays["trained"],
                        voxel=float(params["voxel"]), max_cells=int(params["max_cells"]),
                        stride=float(params["stride"]), detection=params.get("detection", {}),
                        svm=params.get("svm", {}), provenance=params.get("provenance", {}), cv=params.get("cv"),
@@ -198,8 +206,43 @@ class Model:
                        atom_weights=arrays.get("atom_weights"), atom_bias=arrays.get("atom_bias"),
                        boxfit=BoxFit.from_arrays(arrays, params.get("boxfit")),
                        rescorer=Rescorer.from_arrays(arrays, params.get("rescore")))
-        except (KeyError, ValueError) as exc:
-            raise UserError(stem + ".npz", f"incomplete or inconsistent model ({exc})") from None
+        except (KeyError, ValueError, TypeError, IndexError, AttributeError) as exc:
+            raise UserError(stem + ".npz", f"incomplete or inconsistent model ({type(exc).__name__}: {exc})") \
+                from None
+        from engine.crf.model import FORMAT as CRF_FORMAT
+        from engine.crf.model import CRFWeights
+
+        if isinstance(model.crf, dict) and model.crf.get("format") == CRF_FORMAT:  # (the slot holds any JSON)
+            try:
+                CRFWeights.from_model(model)  # checked now, not when the CRF stage comes after the detection
+            except (KeyError, ValueError, TypeError, IndexError, AttributeError) as exc:
+                raise UserError(stem + ".npz", f"its CRF weights are not valid ({exc})") from None
+        return model
+
+
+#: JSON fields a model must have, with their type and what their value must be.
+_PARAM_RULES: dict[str, tuple[type | tuple[type, ...], Any, str]] = {
+    "version": (int, lambda v: v >= 1, "an integer >= 1"),
+    "voxel": ((int, float), lambda v: math.isfinite(v) and v > 0, "a finite number of metres > 0"),
+    "max_cells": (int, lambda v: v >= 1, "an integer >= 1"),
+    "stride": ((int, float), lambda v: math.isfinite(v) and 0 < v <= 1, "a fraction in (0, 1]"),
+    "layout": (dict, lambda v: True, "an object"),
+    "dictionary": (dict, lambda v: True, "an object"),
+    "classes": (list, lambda v: True, "a list of class names"),
+}
+
+
+def _check_params(params: dict[str, Any], path: str) -> None:
+    """Each JSON field of :data:`_PARAM_RULES` present, of its type and in its range; a one-line UserError."""
+    for key, (types, ok, what) in _PARAM_RULES.items():
+        if key not in params:
+            raise UserError(path, f"model description lacks {key!r}")
+        v = params[key]
+        if isinstance(v, bool) or not isinstance(v, types) or not ok(v):
+            raise UserError(path, f"model field {key} = {json.dumps(v)[:60]}: must be {what}")
+    for key in ("detection", "svm", "provenance", "cv", "crf", "boxfit", "rescore"):
+        if params.get(key) is not None and not isinstance(params[key], dict):
+            raise UserError(path, f"model field {key} must be an object or null, not {type(params[key]).__name__}")
 
 
 def _json_default(o: Any) -> Any:

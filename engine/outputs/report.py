@@ -80,7 +80,15 @@ img.plan{max-width:100%;border:1px solid #ddd}
 
 
 def _esc(x: Any) -> str:
-    return html.escape(str(x), quote=True)
+    return html.escape(printable(str(x)), quote=True)
+
+
+def printable(s: str) -> str:
+    """``s`` with the undecodable bytes of an OS path (surrogate escapes) shown as ``\\xNN``."""
+    try:
+        return s.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # other lone surrogates
+        return s.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _missing(v: Any) -> bool:
@@ -385,7 +393,7 @@ def write_report(out_dir: str | os.PathLike, *, metrics: dict[str, Any], statist
                          title=title, viewer="viewer.html" if os.path.isfile(here("viewer.html")) else None)
     path = here(REPORT)
     tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as f:
+    with open(tmp, "w", encoding="utf-8", errors="backslashreplace") as f:
         f.write(page)
     os.replace(tmp, path)
     return path

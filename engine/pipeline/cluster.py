@@ -28,6 +28,7 @@ from distributed import Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
 from engine import config
+from engine.pipeline.taskerrors import task_errors_to_log
 from tiles import paths
 from tiles.errors import UserError
 
@@ -78,6 +79,7 @@ def cluster_client(scheduler: str | None = None, *, n_workers: int | None = None
         client = Client(cluster)
     try:
         pin_library_threads(client)
+        task_errors_to_log(client)  # dask's error blocks into buildingparser.log, not onto the terminal
         if not quiet:
             link = client.dashboard_link if _has_dashboard(client) else "(no dashboard)"
             where = address or f"local cluster, {len(client.scheduler_info()['workers'])} workers"

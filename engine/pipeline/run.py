@@ -26,7 +26,6 @@ import hashlib
 import logging
 import os
 import shutil
-import tempfile
 from typing import Any
 
 from engine.config import validate_settings
@@ -42,6 +41,8 @@ from engine.pipeline.documents import (
     save_proposals,
     space_lookup,
 )
+from engine.pipeline.outfolder import claim_output_folder, record_written
+from engine.pipeline.plausible import check_cloud, check_parsable
 from engine.pipeline.provenance import Provenance
 from engine.pipeline.results import (
     all_timings,
@@ -59,6 +60,7 @@ from tiles import paths
 from tiles.classes import ELEMENT_CLASSES
 from tiles.errors import UserError
 from tiles.export_layout import LAYOUT_VERSION
+from tiles.leftovers import temporary_folder
 from tiles.store import TileStore, open_store
 from tiles.tasks import quiet_progress
 
@@ -90,20 +92,21 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
     opt = options or RunSettings()
     check_run_inputs(input, opt)  # before any folder is made
     out = paths.normalize(out)
-    _check_out(out)
-    pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
-    withdraw_report(out, opt.storage_options)
-    provenance = Provenance(input, storage_options=opt.storage_options, is_store=is_store(input, opt.storage_options))
-    staging = tempfile.mkdtemp(prefix="buildingparser-run-")
-    try:
-        with performance_report(client, os.path.join(staging, "dask-report.html")):
-            metrics, stats = _compute(input, out, client, opt, staging)
-        metrics["provenance"] = provenance.finish(model_path=opt.model, options=opt, client=client)
-        write_metrics_outputs(metrics, stats, staging)
-        publish(staging, out, opt.storage_options)
-        return metrics
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    with claim_output_folder(out, force=opt.force):  # one line and nothing touched if it is not ours to write
+        pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
+        provenance = Provenance(input, storage_options=opt.storage_options,
+                                is_store=is_store(input, opt.storage_options))
+        staging = temporary_folder("run")
+        try:
+            with performance_report(client, os.path.join(staging, "dask-report.html")):
+                metrics, stats = _compute(input, out, client, opt, staging)
+            metrics["provenance"] = provenance.finish(model_path=opt.model, options=opt, client=client)
+            write_metrics_outputs(metrics, stats, staging)
+            publish(staging, out, opt.storage_options)
+            record_written(out, os.listdir(staging))
+            return metrics
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
 
 
 def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -114,8 +117,12 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
     from engine.spaces.update import update_summary
 
     model = load_model(opt.model)  # a bad model path fails here, before any long work
+    if opt.crf:
+        _check_crf_weights(model, opt.model)
     timings: dict[str, float] = {}
     store, fp_ingest = _ingest_stage(input, out, client, opt, timings)
+    check_parsable(store, input)  # before any task of the parse: one line for a cloud it cannot represent
+    withdraw_report(out, opt.storage_options)  # the input is valid: from here the folder is incomplete until published
     ctx = RunContext(input, out, opt, client, staging, store, timings)
     has_truth = "gt_space" in store.meta.names()
     parsed, fp_spaces = _spaces_stage(ctx, fp_ingest)
@@ -300,6 +307,7 @@ def _start_export(ctx: RunContext, fp_export: str):
     def job() -> None:
         _, seconds = ctx.record("export", fp_export, lambda: export(
             ctx.store, target, client=ctx.client, overwrite=True, storage_options=opt.storage_options))
+        record_written(ctx.out, ["points.laz"])
         logger.info("points.laz: %s points (%.1f s)", f"{ctx.store.meta.point_count:,}", seconds)
 
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="buildingparser-export")
@@ -335,7 +343,7 @@ def _ingest_stage(input: str, out: str, client, opt: RunSettings,
             pass  # unfinished or foreign: ingest again
     with Timer() as t:
         store = ingest([input], url, client=client, overwrite=True, tile_size=opt.tile_size,
-                       storage_options=opt.storage_options)
+                       storage_options=opt.storage_options, accept=lambda facts: check_cloud(facts, input))
     timings["ingest"] = t.seconds
     StageLog(store).write(StageRecord("ingest", fp, "ok", t.seconds, outputs={"points": store.meta.point_count}))
     logger.info("ingest: %s points into %s (%.1f s)", f"{store.meta.point_count:,}", url, t.seconds)
@@ -357,6 +365,17 @@ def _source_identity(input: str, storage_options: dict[str, Any] | None) -> list
     return ident
 
 
+def _check_crf_weights(model, path: str | None) -> None:
+    """The model's CRF weights (when it has some) usable, before any work; a one-line UserError otherwise."""
+    from engine.crf.model import CRFWeights
+    from engine.detection.model import default_model_path
+
+    try:
+        CRFWeights.from_model(model)
+    except (KeyError, ValueError, TypeError, IndexError, AttributeError) as exc:
+        raise UserError(path or default_model_path(), f"the model's CRF weights are not valid ({exc})") from None
+
+
 def _model_hash(path: str | None) -> str:
     from engine.detection.model import default_model_path, model_stem
 
@@ -368,9 +387,3 @@ def _model_hash(path: str | None) -> str:
     return h.hexdigest()[:16]
 
 
-def _check_out(out: str) -> None:
-    if paths.is_local(out):
-        p = paths.local_path(out)
-        if os.path.exists(p) and not os.path.isdir(p):
-            raise UserError(out, "the output folder is a file")
-        os.makedirs(p, exist_ok=True)

@@ -115,3 +115,30 @@ def test_each_batch_logs_one_debug_line_at_its_end(caplog):
     lines = [r.getMessage() for r in caplog.records if r.name == "tiles.tasks"]
     assert len(lines) == 2
     assert lines[0].startswith("doubling: 3/3 tasks in ") and lines[1].startswith("failing: 2/2 tasks in ")
+
+
+def _refuse_once(item, tally):
+    """A task that finds a mistake in its input (and notes every try in ``tally``)."""
+    with open(tally, "a") as f:
+        f.write(f"{item}\n")
+    if item == 3:
+        from tiles.errors import UserError
+
+        raise UserError("input.txt", "line 3: 2 columns, expected 3")
+    return item
+
+
+def test_a_user_error_in_a_task_is_not_retried_and_reads_as_its_line(client, tmp_path, capfd):
+    import dask
+
+    from tiles.errors import UserError
+    from tiles.tasks import run_tasks
+
+    tally = tmp_path / "tries.txt"
+    with dask.config.set({"buildingparser.retries": 3}):
+        with pytest.raises(UserError) as e:
+            run_tasks(_refuse_once, [3], client=client, extra_args=(str(tally),))
+    assert e.value.line() == "input.txt: line 3: 2 columns, expected 3"
+    assert tally.read_text().splitlines() == ["3"]  # one try, not four
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "Compute Failed" not in err

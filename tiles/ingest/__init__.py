@@ -14,7 +14,8 @@ from __future__ import annotations
 import os
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -210,7 +211,8 @@ class IngestReport(dict):
 
 def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: bool = False,
            tile_size: float | None = None, part_points: int | None = None,
-           storage_options: dict[str, Any] | None = None) -> TileStore:
+           storage_options: dict[str, Any] | None = None,
+           accept: Callable[[CloudFacts], None] | None = None) -> TileStore:
     """Read point clouds into a new tile store and return it.
 
     Parameters
@@ -228,6 +230,10 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
         Points per task (default ``buildingparser.ingest.part-points``).
     storage_options
         fsspec options for URLs, for the sources and the store alike.
+    accept
+        Called with the :class:`CloudFacts` of the points read, before the
+        tiles are written; an exception it raises ends the ingest (nothing is
+        left of the store).
 
     The report (points, seconds, warnings) is in ``store.ingest_report``.
     """
@@ -253,6 +259,8 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
                             keys=[f"{os.path.basename(r.path)}#{k}" for k, (_, r, _) in enumerate(items)],
                             extra_args=(builder, grid))
         summaries, parts, counts, stats = _collect_parts(readers, owners, results)
+        if accept is not None:
+            accept(cloud_facts(summaries, grid, builder.tile_size))
         infos = [r.source_info(st) for r, st in zip(readers, stats)]
         srcs = [Source(r.path, r.format, n, info) for r, n, info in zip(readers, counts, infos)]
         docs = _ground_truth_docs(readers, stats, grid)
@@ -269,6 +277,28 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
                                         sources=len(readers), parts=len(parts), tiles=len(result.meta.tiles),
                                         warnings=notes)
     return result
+
+
+@dataclass
+class CloudFacts:
+    """What the staged parts tell of a cloud before its tiles are written."""
+
+    points: int
+    tiles: int  # occupied tiles
+    tile_size: float
+    extent: tuple[float, float, float]  # metres along x, y, z
+
+
+def cloud_facts(summaries: list, grid: Quantization, tile_size: float) -> CloudFacts:
+    """The :class:`CloudFacts` of staged parts (their per-tile counts and raw bounds)."""
+    keys = {k for s in summaries for k in s.tiles}
+    runs = [r for s in summaries for r in s.tiles.values()]
+    if not runs:
+        return CloudFacts(0, 0, float(tile_size), (0.0, 0.0, 0.0))
+    lo = [min(r[1][i] for r in runs) for i in range(3)]
+    hi = [max(r[2][i] for r in runs) for i in range(3)]
+    extent = tuple(float((hi[i] - lo[i]) * grid.scale[i]) for i in range(3))
+    return CloudFacts(sum(s.count for s in summaries), len(keys), float(tile_size), extent)  # type: ignore[arg-type]
 
 
 def _source_list(sources: Sequence[str] | str) -> list[str]:

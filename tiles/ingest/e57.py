@@ -7,9 +7,11 @@ bounded by a part even for a scan larger than memory (E57 compressed vectors
 cannot be entered in the middle, so a scan is not split among tasks).
 
 Stored per point: ``x``, ``y``, ``z`` (0.1 mm grid), ``red``/``green``/``blue``
-when the scans have colour, ``intensity`` (uint16: the scan's
-``intensityLimits`` mapped to 0-65535, or the values rounded when the scan has
-no limits), ``scan_index`` (which scan), and ``row_index``/``column_index`` of
+when the scans have colour (8- and 16-bit limits kept, other ``colorLimits``
+mapped to 0-65535), ``intensity`` (uint16: the scan's ``intensityLimits``
+mapped to 0-65535, or the values rounded when the scan has no limits; limits
+and pose values may be integer, scaled-integer or float nodes; records flagged
+``isIntensityInvalid``/``isColorInvalid`` get 0), ``scan_index`` (which scan), and ``row_index``/``column_index`` of
 structured (gridded) scans.  Records flagged invalid (``cartesianInvalidState``
 or ``sphericalInvalidState`` non-zero: no measured point) are not points: they
 are counted in the source info and a warning, not stored.
@@ -28,6 +30,7 @@ from tiles.ingest.text import color_dimensions
 from tiles.schema import Dimension, coordinate_dimensions
 
 EXTENSIONS = (".e57",)
+_COLOURS = ("colorRed", "colorGreen", "colorBlue")
 
 
 def _pye57():
@@ -66,18 +69,18 @@ class E57Reader(Reader):
                         system = "spherical"
                     else:
                         raise UserError(path, f"scan {i} has neither cartesian nor spherical coordinates")
-                    limits = None
-                    if "intensityLimits" in h.scan_fields:
-                        limits = [float(h.intensityMinimum), float(h.intensityMaximum)]
+                    rotation, translation = _pose(h.node, path, i)
                     self.scans.append({
                         "index": i, "count": int(h.point_count), "system": system,
-                        "rotation": [float(v) for v in h.rotation_matrix.ravel()],
-                        "translation": [float(v) for v in h.translation],
+                        "rotation": rotation, "translation": translation,
                         "color": {"colorRed", "colorGreen", "colorBlue"} <= fields,
-                        "intensity": "intensity" in fields, "intensity_limits": limits,
+                        "color_limits": {k: limits_of(h.node, "colorLimits", k) for k in _COLOURS},
+                        "intensity": "intensity" in fields,
+                        "intensity_limits": limits_of(h.node, "intensityLimits", "intensity"),
                         "grid": {"rowIndex", "columnIndex"} <= fields,
-                        "invalid": ("cartesianInvalidState" if system == "cartesian" else "sphericalInvalidState")
-                        if ({"cartesianInvalidState", "sphericalInvalidState"} & fields) else None,
+                        "invalid": f"{system}InvalidState" if f"{system}InvalidState" in fields else None,
+                        "intensity_invalid": "isIntensityInvalid" in fields,
+                        "color_invalid": "isColorInvalid" in fields,
                         "name": _string(h.node, "name"),
                     })
             finally:
@@ -130,9 +133,13 @@ class E57Reader(Reader):
                   "spherical": ["sphericalRange", "sphericalAzimuth", "sphericalElevation"]}[scan["system"]])
         dtypes = dict.fromkeys(names, "d")
         if scan["color"]:
-            dtypes.update({"colorRed": "H", "colorGreen": "H", "colorBlue": "H"})
+            dtypes.update({"colorRed": "d", "colorGreen": "d", "colorBlue": "d"})
+            if scan.get("color_invalid"):
+                dtypes["isColorInvalid"] = "i1"
         if scan["intensity"]:
             dtypes["intensity"] = "d"
+            if scan.get("intensity_invalid"):
+                dtypes["isIntensityInvalid"] = "i1"
         if scan["grid"]:
             dtypes.update({"rowIndex": "q", "columnIndex": "q"})  # libe57 buffers: b B h H l L q, f d
         if scan["invalid"]:
@@ -186,16 +193,15 @@ class E57Reader(Reader):
         m = len(xyz)
         if "red" in want:
             for c, k in (("red", "colorRed"), ("green", "colorGreen"), ("blue", "colorBlue")):
-                cols[c] = data[k][keep].astype(np.uint16) if scan["color"] else np.zeros(m, np.uint16)
+                cols[c] = _colour(data[k][keep], scan["color_limits"][k], data, keep) if scan["color"] \
+                    else np.zeros(m, np.uint16)
         if "intensity" in want:
+            cols["intensity"] = np.zeros(m, np.uint16)
             if scan["intensity"]:
-                v = data["intensity"][keep]
-                lim = scan["intensity_limits"]
-                if lim and lim[1] > lim[0]:
-                    v = (v - lim[0]) / (lim[1] - lim[0]) * 65535.0
-                cols["intensity"] = np.clip(np.rint(v), 0, 65535).astype(np.uint16)
-            else:
-                cols["intensity"] = np.zeros(m, np.uint16)
+                v = _mapped(data["intensity"][keep], scan["intensity_limits"], 65535.0)
+                if scan.get("intensity_invalid"):
+                    v[data["isIntensityInvalid"][keep] != 0] = 0
+                cols["intensity"] = v
         cols["scan_index"] = np.full(m, scan["index"], dtype=np.uint16)
         if "row_index" in want:
             cols["row_index"] = data["rowIndex"][keep].astype(np.uint32) if scan["grid"] else np.zeros(m, np.uint32)
@@ -206,7 +212,9 @@ class E57Reader(Reader):
     def source_info(self, stats: list[dict[str, Any]]) -> dict[str, Any]:
         return {"scans": [{"index": s["index"], "name": s["name"], "records": s["count"],
                            "coordinates": s["system"], "structured": s["grid"],
-                           "intensity_limits": s["intensity_limits"]} for s in self.scans],
+                           "intensity_limits": s["intensity_limits"],
+                           "invalid_records": int(sum(t.get("invalid", 0) for t in stats
+                                                      if t.get("scan") == s["index"]))} for s in self.scans],
                 "invalid_records": int(sum(s.get("invalid", 0) for s in stats)),
                 "coordinate_metadata": self.coordinate_metadata}
 
@@ -224,3 +232,70 @@ def _string(node, name: str) -> str | None:
     except Exception:  # noqa: BLE001
         return None
     return None
+
+
+def _number(node) -> float:
+    """The value of a numeric E57 node of any type (integer, scaled integer or float)."""
+    for name in ("scaledValue", "value"):
+        get = getattr(node, name, None)
+        if get is not None:
+            return float(get())
+    raise TypeError(f"{type(node).__name__} is not a numeric E57 node")
+
+
+def limits_of(node, group: str, field: str) -> list[float] | None:
+    """``[minimum, maximum]`` of ``field`` in ``intensityLimits``/``colorLimits`` of any node type, None when absent."""
+    try:
+        if not node.isDefined(group):
+            return None
+        g = node[group]
+        names = (f"{field}Minimum", f"{field}Maximum")
+        if not all(g.isDefined(n) for n in names):
+            return None
+        lo, hi = (_number(g[n]) for n in names)
+    except Exception:  # noqa: BLE001 - a malformed limits node is as good as none
+        return None
+    return [lo, hi] if np.isfinite([lo, hi]).all() and hi > lo else None
+
+
+def _pose(node, path: str, index: int) -> tuple[list[float], list[float]]:
+    """A scan's pose as a row-major 3x3 rotation and a translation (identity and zero when absent)."""
+    rotation, translation = np.eye(3), np.zeros(3)
+    try:
+        if node.isDefined("pose"):
+            pose = node["pose"]
+            if pose.isDefined("rotation"):
+                q = np.array([_number(pose["rotation"][k]) for k in ("w", "x", "y", "z")])
+                norm = float(np.linalg.norm(q))
+                if not np.isfinite(q).all() or norm == 0:
+                    raise UserError(path, f"scan {index}: its pose rotation is not a quaternion ({q.tolist()})")
+                w, x, y, z = q / norm
+                rotation = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+            if pose.isDefined("translation"):
+                translation = np.array([_number(pose["translation"][k]) for k in ("x", "y", "z")])
+                if not np.isfinite(translation).all():
+                    raise UserError(path, f"scan {index}: its pose translation is not finite")
+    except UserError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - libe57 raises its own exceptions
+        raise UserError(path, f"scan {index}: unreadable pose ({type(exc).__name__}: {exc})") from None
+    return [float(v) for v in rotation.ravel()], [float(v) for v in translation]
+
+
+def _mapped(v: np.ndarray, limits: list[float] | None, top: float) -> np.ndarray:
+    """Values mapped from their limits to 0-``top`` (rounded as they are without limits), as uint16."""
+    if limits:
+        v = (v - limits[0]) / (limits[1] - limits[0]) * top
+    return np.clip(np.rint(v), 0, 65535).astype(np.uint16)
+
+
+def _colour(v: np.ndarray, limits: list[float] | None, data: dict[str, np.ndarray], keep: np.ndarray) -> np.ndarray:
+    """A colour channel: 8-bit limits (or none) kept as they are, wider or fractional limits mapped to 0-65535."""
+    if limits and limits[0] == 0 and limits[1] in (255.0, 65535.0):
+        limits = None
+    out = _mapped(v, limits, 65535.0)
+    if "isColorInvalid" in data:
+        out[data["isColorInvalid"][keep] != 0] = 0
+    return out

@@ -62,6 +62,8 @@ class LasReader(Reader):
                 raise UserError(path, "empty point cloud: the header counts 0 points")
             if not all(math.isfinite(s) and s > 0 for s in self.scales):
                 raise UserError(path, f"invalid scale factors {self.scales} in the header")
+            if not all(math.isfinite(o) for o in self.offsets):
+                raise UserError(path, f"invalid offsets {self.offsets} in the header")
             if self.compressed:
                 self._check_laz(f, header, size)
             else:

@@ -38,6 +38,9 @@ class Quantization:
         out: dict[str, np.ndarray] = {}
         for i, a in enumerate("xyz"):
             v = np.rint((xyz[:, i] - self.offset[i]) / self.scale[i])
+            if not np.isfinite(v).all():
+                bad = int(np.count_nonzero(~np.isfinite(xyz[:, i])))
+                raise UserError(path, f"{bad:,} non-finite (NaN or infinite) {a} coordinates")
             if len(v) and (v.min() < _INT32.min or v.max() > _INT32.max):
                 raise UserError(path, f"{a} coordinates span more than int32 steps of {self.scale[i]} m around "
                                       f"{self.offset[i]} m: the cloud is too large for this scale")

@@ -93,3 +93,55 @@ def test_window_weights_add_each_windows_own_part_and_round_trip(tmp_path):
         dataclasses.replace(m, atom_weights=aw[:, :3], atom_bias=ab)
     with pytest.raises(ValueError):
         dataclasses.replace(m, atom_weights=aw, atom_bias=None)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("voxel", -1, "model field voxel = -1: must be a finite number of metres > 0"),
+    ("voxel", float("nan"), "model field voxel = NaN: must be a finite number"),
+    ("voxel", "0.1", 'model field voxel = "0.1": must be a finite number'),
+    ("max_cells", 0, "model field max_cells = 0: must be an integer >= 1"),
+    ("max_cells", 1.5, "model field max_cells = 1.5: must be an integer"),
+    ("stride", 2, r"model field stride = 2: must be a fraction in \(0, 1\]"),
+    ("layout", [1, 2], "model field layout = \\[1, 2\\]: must be an object"),
+    ("version", True, "model field version = true: must be an integer"),
+    ("svm", "x", "model field svm must be an object or null"),
+])
+def test_wrong_types_and_ranges_in_the_json_are_one_line(tmp_path, field, value, message):
+    _model().save(tmp_path / "m")
+    doc = json.loads((tmp_path / "m.json").read_text())
+    doc[field] = value
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(UserError, match=message) as e:
+        Model.load(tmp_path / "m")
+    assert "\n" not in e.value.line() and e.value.path.endswith("m.json")
+
+
+def test_a_missing_field_and_bad_arrays_are_one_line(tmp_path):
+    m = _model()
+    m.save(tmp_path / "m")
+    doc = json.loads((tmp_path / "m.json").read_text())
+    del doc["layout"]
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(UserError, match="model description lacks 'layout'"):
+        Model.load(tmp_path / "m")
+    arrays = m.arrays()
+    for name, bad, message in (("weights", np.full_like(arrays["weights"], np.nan), "weights must hold finite numbers"),
+                               ("weights", arrays["weights"][:, :3], r"incomplete or inconsistent model .*shape"),
+                               ("bias", np.array(["a"] * 12), "bias must hold finite numbers")):
+        m.save(tmp_path / "b")
+        np.savez(tmp_path / "b.npz", **{**arrays, name: bad})
+        with pytest.raises(UserError, match=message) as e:
+            Model.load(tmp_path / "b")
+        assert "Traceback" not in e.value.line()
+
+
+def test_broken_crf_weights_in_a_model_are_refused_on_load(tmp_path):
+    from engine.crf.model import CLASS_PAIRS, CRFWeights, edge_feature_size
+
+    m = _model()
+    CRFWeights(0.5, np.zeros(12), np.zeros((len(CLASS_PAIRS), edge_feature_size(2))), 2, np.ones(12, int)).store_in(m)
+    m.save(tmp_path / "m")
+    assert CRFWeights.from_model(Model.load(tmp_path / "m")) is not None
+    np.savez(tmp_path / "m.npz", **{**m.arrays(), "crf_edge": np.zeros((3, 3))})
+    with pytest.raises(UserError, match=r"its CRF weights are not valid \(edge weights of shape \(3, 3\)"):
+        Model.load(tmp_path / "m")

@@ -215,3 +215,14 @@ def test_provenance_is_shown():
     assert t["setting buildingparser.tiles.size"] == ["20.0"] and t["setting run: crf"] == ["false"]
     assert "scan&lt;1&gt;.laz" in page
     assert "No provenance recorded" in render_report(METRICS)
+
+
+def test_a_path_that_is_not_utf8_is_shown_escaped(tmp_path):
+    import os
+
+    raw = os.fsdecode(b"/data/caf\xe9 scan/r\xc3\xa9sum\xff.laz")  # latin-1 bytes, then UTF-8, then a stray byte
+    metrics = dict(METRICS, input=dict(METRICS["input"], path=raw))
+    (tmp_path / "metrics.json").write_text(json.dumps(metrics))
+    path = write_report(tmp_path, metrics=json.loads((tmp_path / "metrics.json").read_text()))
+    page = open(path, encoding="utf-8").read()  # valid UTF-8
+    assert "/data/caf\\xe9 scan/résum\\xff.laz" in page and "résum\\xff.laz" in page.split("<title>")[1]

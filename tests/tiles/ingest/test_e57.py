@@ -96,3 +96,74 @@ def test_e57_store_exports_its_scan_dimensions(tmp_path):
         np.testing.assert_array_equal(out.points.array[name], got[name])
     np.testing.assert_array_equal(np.asarray(out.intensity), got["intensity"])
     np.testing.assert_array_equal(np.asarray(out.red) // 257, got["red"])
+
+
+SHARED_E57 = __import__("pathlib").Path(__file__).resolve().parents[3] / ".." / "shared" / "data" / "e57"
+
+
+@pytest.mark.parametrize("name", ["bunnyFloat.e57", "pumpA.e57"])
+def test_every_shared_e57_file_ingests_with_all_its_valid_points(tmp_path, name):
+    """Scaled-integer and float fields, intensity limits of any node type (pumpA: ScaledIntegerNode), poses."""
+    path = SHARED_E57 / name
+    if not path.exists():
+        pytest.skip(f"{path} is absent (the shared E57 reference files are not on this machine)")
+    s = ingest([str(path)], str(tmp_path / "s.zarr"))
+    ref = pye57.E57(str(path))
+    scans = [ref.read_scan_raw(i) for i in range(ref.scan_count)]
+    valid = [d.get("cartesianInvalidState", np.zeros(len(d["cartesianX"]))) == 0 for d in scans]
+    assert s.meta.point_count == sum(int(v.sum()) for v in valid) > 0
+    info = s.meta.sources[0].info
+    assert info["invalid_records"] == sum(len(v) - int(v.sum()) for v in valid)
+    got = gather_points(s)
+    want = np.concatenate([
+        np.stack([d[k][v] for k in ("cartesianX", "cartesianY", "cartesianZ")], axis=1) @ ref.get_header(i).rotation_matrix.T
+        + ref.get_header(i).translation for i, (d, v) in enumerate(zip(scans, valid))])
+    xyz = np.stack([got[a] * 1e-4 + o for a, o in zip("xyz", s.meta.offset)], axis=1)
+    np.testing.assert_allclose(xyz, want, atol=6e-5)
+    if "intensity" in scans[0]:
+        lo, hi = info["scans"][0]["intensity_limits"]
+        expected = np.clip(np.rint((scans[0]["intensity"][valid[0]] - lo) / (hi - lo) * 65535), 0, 65535)
+        np.testing.assert_allclose(got["intensity"], expected, atol=1)  # float rounding at .5
+
+
+class _Scaled:
+    def __init__(self, v):
+        self.v = v
+
+    def scaledValue(self):  # noqa: N802 - libe57's name
+        return self.v
+
+
+class _Plain(_Scaled):
+    scaledValue = None  # type: ignore[assignment]
+
+    def value(self):
+        return self.v
+
+
+class _Group(dict):
+    def isDefined(self, name):  # noqa: N802 - libe57's name
+        return name in self
+
+
+@pytest.mark.parametrize("node", [_Scaled, _Plain])
+def test_intensity_limits_of_any_node_type(node):
+    from tiles.ingest.e57 import limits_of
+
+    scan = _Group(intensityLimits=_Group(intensityMinimum=node(2.0), intensityMaximum=node(10.0)))
+    assert limits_of(scan, "intensityLimits", "intensity") == [2.0, 10.0]
+    assert limits_of(_Group(), "intensityLimits", "intensity") is None
+    flat = _Group(intensityLimits=_Group(intensityMinimum=node(3.0), intensityMaximum=node(3.0)))
+    assert limits_of(flat, "intensityLimits", "intensity") is None  # no range: values are rounded as they are
+
+
+def test_a_pose_with_a_bad_quaternion_is_refused_in_one_line(tmp_path):
+    from tiles.errors import UserError
+
+    path = tmp_path / "bad.e57"
+    with pye57.E57(str(path), mode="w") as e:
+        e.write_scan_raw({"cartesianX": np.zeros(3), "cartesianY": np.ones(3), "cartesianZ": np.arange(3.0)},
+                         rotation=np.zeros(4), translation=np.zeros(3))
+    with pytest.raises(UserError, match="pose rotation is not a quaternion"):
+        ingest([str(path)], str(tmp_path / "s.zarr"))
+    assert not (tmp_path / "s.zarr").exists()
