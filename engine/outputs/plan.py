@@ -110,6 +110,7 @@ def draw_plan(spaces: dict[str, Any], elements: list[dict[str, Any]], png: str |
         ax.set_xlim(bounds[0] - 0.05 * w, bounds[2] + 0.05 * w)
         ax.set_ylim(bounds[1] - 0.05 * h, bounds[3] + 0.05 * h)
         ax.set_aspect("equal")
+        ax.ticklabel_format(useOffset=False, style="plain")  # world coordinates as they are (UTM: 6-7 digits)
         ax.tick_params(labelsize=6)
         _scale_bar(ax, w)
         if crs_known:
