@@ -20,13 +20,13 @@ def _final():
     return SimpleNamespace(spaces=[s])
 
 
-def test_an_input_with_geotiff_keys_only_gives_both_files_its_crs(tmp_path, monkeypatch):
-    import engine.outputs.floorplan
+def test_an_input_with_geotiff_keys_only_gives_both_files_its_crs(tmp_path):
+    import dask
 
-    monkeypatch.setattr(engine.outputs.floorplan, "draw_floorplan", lambda *a, **k: None)
     store = SimpleNamespace(meta=SimpleNamespace(crs={"geotiff": {"keys": [[1024, 0, 1, 1], [3072, 0, 1, 32633]]},
                                                       "epsg": 32633}))
-    write_plan_outputs(store, _final(), [], str(tmp_path), None)
+    with dask.config.set({"buildingparser.outputs.viewer": False}):  # the 3D view samples a store's tiles
+        write_plan_outputs(store, _final(), [], str(tmp_path), None)
     doc = json.loads((tmp_path / "spaces.geojson").read_text())
     assert doc["crs"]["properties"]["name"] == "urn:ogc:def:crs:EPSG::32633"
     assert shape(doc["features"][0]["geometry"]).exterior.is_ccw
@@ -36,3 +36,5 @@ def test_an_input_with_geotiff_keys_only_gives_both_files_its_crs(tmp_path, monk
         assert CRS.from_user_input(info["crs"]) == CRS.from_epsg(32633), name
         assert list(info["total_bounds"]) == [X0, Y0, X0 + 5, Y0 + 4], name
         assert "perimeter_m" in list(info["fields"]), name
+    ifc = (tmp_path / "building.ifc").read_text()
+    assert "IFCPROJECTEDCRS('EPSG:32633'" in ifc  # and the building model's map conversion
