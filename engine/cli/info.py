@@ -36,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     from tiles.info import file_info, format_file_info, format_info, store_info
     from tiles.store import open_store
 
-    if paths.exists(paths.join(paths.normalize(args.store), "zarr.json"), args.storage_options):
+    path = paths.normalize(args.store)
+    if path.rstrip("/").endswith(".zarr") or paths.exists(paths.join(path, "zarr.json"), args.storage_options):
         info = store_info(open_store(args.store, args.storage_options))
         print(json.dumps(info, indent=2) if args.json else format_info(info))
     else:

@@ -125,8 +125,9 @@ def test_an_unknown_setting_is_refused_with_the_closest_name(tmp_path, capsys, n
 
 def test_good_settings_reach_the_command(tmp_path, capsys, no_cluster):
     """Valid settings pass the check: the command runs and starts its cluster (refused here)."""
+    (tmp_path / "in.laz").write_bytes(b"")  # the input is checked before the cluster: it must exist
     with dask.config.set({"buildingparser.crf.time-limit": 3}), pytest.raises(AssertionError, match="cluster"):
-        main(["run", str(tmp_path / "missing.laz"), "--out", str(tmp_path / "out")])
+        main(["run", str(tmp_path / "in.laz"), "--out", str(tmp_path / "out")])
 
 
 def test_the_python_run_checks_the_settings_first(tmp_path):
