@@ -24,12 +24,19 @@ def boxes_array(records: Sequence[dict[str, Any]]) -> np.ndarray:
     return out
 
 
-def _corners_2d(box: np.ndarray) -> np.ndarray:
-    """Footprint corners (4, 2) of one box, counter-clockwise."""
+def corners_2d(box: np.ndarray) -> np.ndarray:
+    """Footprint corners (4, 2) of one box ``[cx, cy, cz, dx, dy, dz, yaw]``, counter-clockwise."""
     cx, cy, _, dx, dy, _, yaw = box
     c, s = np.cos(yaw), np.sin(yaw)
     local = np.array([[-dx, -dy], [dx, -dy], [dx, dy], [-dx, dy]]) / 2.0
     return local @ np.array([[c, s], [-s, c]]) + [cx, cy]
+
+
+def long_axis(size: Sequence[float], yaw: float) -> tuple[np.ndarray, float]:
+    """The unit vector (x, y) along a box's longer horizontal side, and that side's length."""
+    along = 0 if size[0] >= size[1] else 1
+    c, s = float(np.cos(yaw)), float(np.sin(yaw))
+    return (np.array([c, s]) if along == 0 else np.array([-s, c])), float(size[along])
 
 
 def _clip_area(subject: np.ndarray, clip: np.ndarray) -> float:
@@ -107,7 +114,7 @@ def box_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         oy = np.minimum(a[ii, 4] / 2, by + bdy / 2) - np.maximum(-a[ii, 4] / 2, by - bdy / 2)
         area[ii, jj] = np.clip(ox, 0, None) * np.clip(oy, 0, None)
     for i, j in zip(*np.nonzero(cand & ~aligned)):
-        area[i, j] = _clip_area(_corners_2d(a[i]), _corners_2d(b[j]))
+        area[i, j] = _clip_area(corners_2d(a[i]), corners_2d(b[j]))
     inter = area * dz
     va = a[:, 3] * a[:, 4] * a[:, 5]
     vb = b[:, 3] * b[:, 4] * b[:, 5]

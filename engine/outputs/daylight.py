@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from engine.metrics.boxes import long_axis
+
 TRANSMITTANCE = 0.68
 SKY_ANGLE = 90.0
 REFLECTANCE = 0.5
@@ -52,9 +54,7 @@ def average_daylight_factor(glazed_m2: float, floor_m2: float, perimeter_m: floa
 
 def outward_bearing(window: dict[str, Any], centre: np.ndarray, convergence_deg: float = 0.0) -> float:
     """Bearing (degrees clockwise from north, 0-360) of a window's normal pointing away from ``centre``."""
-    size, yaw = window["size"], float(window["yaw"])
-    along = 0 if size[0] >= size[1] else 1
-    axis = np.array([math.cos(yaw), math.sin(yaw)]) if along == 0 else np.array([-math.sin(yaw), math.cos(yaw)])
+    axis, _ = long_axis(window["size"], float(window["yaw"]))
     normal = np.array([-axis[1], axis[0]])
     if float(np.dot(np.asarray(window["center"][:2], float) - centre, normal)) < 0:
         normal = -normal
@@ -119,3 +119,16 @@ def add_daylight_to_geojson(layer: dict[str, Any], figures: dict[int, dict[str, 
         extra = figures.get(int(f["properties"]["id"]), {})
         feats.append(dict(f, properties={**f["properties"], **extra}))
     return dict(layer, features=feats)
+
+
+def layer_with_figures(layer: dict[str, Any], elements: list[dict[str, Any]], crs_text: str | None = None
+                       ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The spaces layer with each space's statistics and daylight figures in its properties, and the statistics
+    (:func:`engine.outputs.statistics.space_statistics`, each space's row with its daylight figures too)."""
+    from engine.outputs.statistics import add_statistics_to_geojson, space_statistics
+
+    stats = space_statistics(layer, elements)
+    figures = daylight(layer, elements, crs_text)
+    for row in stats["spaces"]:
+        row.update(figures.get(int(row["id"]), {}))
+    return add_daylight_to_geojson(add_statistics_to_geojson(layer, stats), figures), stats

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from engine.metrics.boxes import long_axis
 from engine.outputs.runfolder import read_run_outputs
 from tiles.errors import UserError
 
@@ -63,14 +64,7 @@ def _features(layer: dict[str, Any]) -> dict[int, dict[str, Any]]:
 def wall_on_seam(wall: dict[str, Any], seam, distance: float = SEAM_DISTANCE, share: float = SEAM_SHARE) -> bool:
     """True when a wall's long axis runs along ``seam`` (a shapely line): within ``distance`` of it over at
     least ``share`` of the wall's length."""
-    from shapely.geometry import LineString
-
-    size, yaw = wall["size"], float(wall["yaw"])
-    along = 0 if size[0] >= size[1] else 1
-    half = float(size[along]) / 2
-    axis = np.array([np.cos(yaw), np.sin(yaw)]) if along == 0 else np.array([-np.sin(yaw), np.cos(yaw)])
-    c = np.asarray(wall["center"][:2], dtype=float)
-    line = LineString([c - axis * half, c + axis * half])
+    line = _wall_line(wall)
     if line.length == 0 or seam.is_empty:
         return False
     return line.intersection(seam.buffer(distance)).length >= share * line.length
@@ -155,13 +149,12 @@ def plan_merge(layer: dict[str, Any], elements: list[dict[str, Any]], ids: Seque
 
 
 def _wall_line(wall: dict[str, Any]):
+    """A wall's long horizontal axis as a shapely segment."""
     from shapely.geometry import LineString
 
-    size, yaw = wall["size"], float(wall["yaw"])
-    along = 0 if size[0] >= size[1] else 1
-    axis = np.array([np.cos(yaw), np.sin(yaw)]) if along == 0 else np.array([-np.sin(yaw), np.cos(yaw)])
+    axis, length = long_axis(wall["size"], float(wall["yaw"]))
     c = np.asarray(wall["center"][:2], dtype=float)
-    return LineString([c - axis * size[along] / 2, c + axis * size[along] / 2])
+    return LineString([c - axis * length / 2, c + axis * length / 2])
 
 
 def plan_split(layer: dict[str, Any], elements: list[dict[str, Any]], space: int, line: Sequence[float]
@@ -252,10 +245,9 @@ def _edited_metrics(metrics: dict[str, Any], record: dict[str, Any], run: str, s
 def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: int | None = None,
              line: Sequence[float] | None = None, in_place: bool = False) -> dict[str, Any]:
     """Apply one edit to the run folder ``run`` and write the edited run to ``out``; returns the edit record."""
-    from engine.outputs.daylight import add_daylight_to_geojson, daylight
+    from engine.outputs.daylight import layer_with_figures
     from engine.outputs.plan import draw_plan
     from engine.outputs.report import write_report
-    from engine.outputs.statistics import add_statistics_to_geojson, space_statistics
 
     run, out = os.path.abspath(run), os.path.abspath(out)
     if (merge is None) == (split is None):
@@ -275,11 +267,7 @@ def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: i
     shutil.rmtree(staging, ignore_errors=True)
     os.makedirs(staging)
     record.update(rewrite_points(os.path.join(run, "points.laz"), os.path.join(staging, "points.laz"), record))
-    stats = space_statistics(layer, elements)
-    figures = daylight(layer, elements, layer.get("crs_wkt"))
-    layer = add_daylight_to_geojson(add_statistics_to_geojson(layer, stats), figures)
-    for row in stats["spaces"]:
-        row.update(figures.get(int(row["id"]), {}))
+    layer, stats = layer_with_figures(layer, elements, layer.get("crs_wkt"))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
         json.dump(layer, f)
     with open(os.path.join(staging, "elements.json"), "w") as f:

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from engine.metrics.boxes import corners_2d, long_axis
+
 #: Walls are drawn at least this thick (m), so a 2 cm detected plane still reads as a wall.
 MIN_WALL = 0.10
 #: A door's gap is cut this deep across its wall (m): through walls up to this thickness.
@@ -40,14 +42,12 @@ def footprint(center: Sequence[float], size: Sequence[float], yaw: float, *, min
               ) -> np.ndarray:
     """The ``(4, 2)`` corners (counter-clockwise) of a box's top view; its thinner horizontal side is at least
     ``min_thickness``."""
-    hx, hy = max(float(size[0]), 0.0) / 2, max(float(size[1]), 0.0) / 2
-    if hx <= hy:
-        hx = max(hx, min_thickness / 2)
+    dx, dy = max(float(size[0]), 0.0), max(float(size[1]), 0.0)
+    if dx <= dy:
+        dx = max(dx, min_thickness)
     else:
-        hy = max(hy, min_thickness / 2)
-    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    c, s = math.cos(yaw), math.sin(yaw)
-    return local @ np.array([[c, s], [-s, c]]) + np.asarray(center[:2], dtype=float)
+        dy = max(dy, min_thickness)
+    return corners_2d(np.array([center[0], center[1], 0.0, dx, dy, 0.0, yaw], dtype=float))
 
 
 def door_swing(door: dict[str, Any], towards: Sequence[float] | None = None) -> dict[str, Any]:
@@ -57,10 +57,7 @@ def door_swing(door: dict[str, Any], towards: Sequence[float] | None = None) -> 
     through 90 degrees to the side of ``towards`` (the door's space), or to the
     box's +normal side without it.
     """
-    size, yaw = door["size"], float(door["yaw"])
-    along = 0 if size[0] >= size[1] else 1
-    width = float(size[along])
-    axis = np.array([math.cos(yaw), math.sin(yaw)]) if along == 0 else np.array([-math.sin(yaw), math.cos(yaw)])
+    axis, width = long_axis(door["size"], float(door["yaw"]))
     normal = np.array([-axis[1], axis[0]])
     center = np.asarray(door["center"][:2], dtype=float)
     if towards is not None and float(np.dot(np.asarray(towards[:2], float) - center, normal)) < 0:

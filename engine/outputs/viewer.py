@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from engine.metrics.boxes import corners_2d
 from tiles.classes import CLASS_NAMES
 from tiles.store import TileStore
 from tiles.tasks import run_tasks
@@ -97,11 +98,9 @@ def space_palette() -> list[str]:
 
 
 def _corners(e: dict[str, Any]) -> np.ndarray:
-    hx, hy, hz = (float(v) / 2 for v in e["size"])
-    c, s = np.cos(e["yaw"]), np.sin(e["yaw"])
-    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    xy = local @ np.array([[c, s], [-s, c]]) + np.asarray(e["center"][:2])
-    z0, z1 = e["center"][2] - hz, e["center"][2] + hz
+    """The 8 corners of an element's box: its footprint at the bottom, then at the top."""
+    xy = corners_2d(np.array([*e["center"], *e["size"], e["yaw"]], dtype=float))
+    z0, z1 = e["center"][2] - e["size"][2] / 2, e["center"][2] + e["size"][2] / 2
     return np.vstack([np.c_[xy, np.full(4, z0)], np.c_[xy, np.full(4, z1)]])
 
 

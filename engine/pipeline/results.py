@@ -119,21 +119,17 @@ def write_plan_outputs(store: TileStore, final, elements, staging: str, client) 
     """``spaces.geojson``, ``spaces.gpkg``, ``elements.json``, the floor plan (``floorplan.png``,
     ``floorplan.svg``), the building model (``building.ifc``) and the 3D view (``viewer.html``) into ``staging``;
     returns the space statistics."""
-    from engine.outputs.daylight import add_daylight_to_geojson, daylight
+    from engine.outputs.daylight import layer_with_figures
     from engine.outputs.geojson import spaces_feature_collection, write_spaces_gpkg
     from engine.outputs.labels import element_records, write_elements_json
     from engine.outputs.plan import draw_plan
-    from engine.outputs.statistics import add_statistics_to_geojson, space_statistics
     from tiles.crs import parse_crs
 
     crs = parse_crs(store.meta.crs)
     geo = spaces_feature_collection(final, crs)
     records = element_records(elements, with_voxels=False)
-    stats = space_statistics(geo, records)
-    figures = daylight(geo, records, crs.to_wkt() if crs is not None else None)
-    layer = json_safe(add_daylight_to_geojson(add_statistics_to_geojson(geo, stats), figures))
-    for row in stats["spaces"]:
-        row.update(figures.get(int(row["id"]), {}))
+    annotated, stats = layer_with_figures(geo, records, crs.to_wkt() if crs is not None else None)
+    layer = json_safe(annotated)
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
         json.dump(layer, f, allow_nan=False)
     write_spaces_gpkg(layer, os.path.join(staging, "spaces.gpkg"), crs)
