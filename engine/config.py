@@ -76,7 +76,7 @@ SETTINGS: dict[str, Any] = {
         "floorplan": {"min-pixel": "float > 0", "max-pixels": "int >= 1"},
     },
     # engine/outputs/outputs.yaml
-    "outputs": {"ifc": "bool", "viewer": "bool", "viewer-max-points": "int >= 1"},
+    "outputs": {"ifc": "bool", "copc": "bool", "viewer": "bool", "viewer-max-points": "int >= 1"},
     # engine/spaces/update.yaml
     "space-update": {
         "coverage": "float in (0, 1]", "distance": "float >= 0", "max-angle": "float in [0, 90]",

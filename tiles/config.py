@@ -242,5 +242,6 @@ declare({
     "ingest": {"part-points": "int >= 1", "scale": "float > 0", "bad-lines": "one of error, skip",
                "s3dis": {"check-room-files": "bool"}},
     "export": {"part-points": "int >= 1", "window": "int >= 1 | null", "scratch": "str | null"},
+    "copc": {"node-points": "int >= 1", "group-points": "int >= 1"},
 })
 register()

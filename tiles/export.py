@@ -88,8 +88,8 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     layout = plan_layout(store, point_format)
     header, evlrs = build_header(store, layout)
     unit = unit_points(part_points)
-    window = _window(window, client)
-    tmp, tmpdir = _temporary_file(out, ext)
+    window = export_window(window, client)
+    tmp, tmpdir = temporary_file(out, ext)
     written = 0
     scratch = scratch_for(store)
     try:
@@ -98,7 +98,7 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
                               compress=ext == ".laz")
         if written != store.meta.point_count:
             raise RuntimeError(f"export wrote {written} points of {store.meta.point_count}")
-        _publish(tmp, out, storage_options)
+        publish_file(tmp, out, storage_options)
     except BaseException:
         if os.path.exists(tmp):
             os.remove(tmp)
@@ -112,7 +112,7 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
             "point_format": layout.point_format, "extra_dimensions": [e["name"] for e in layout.extra]}
 
 
-def _window(window: int | None, client) -> int:
+def export_window(window: int | None, client) -> int:
     """Unit tasks in flight at most: ``window``, else ``buildingparser.export.window``, else twice the workers
     (one without a client)."""
     if window is None:
@@ -122,7 +122,7 @@ def _window(window: int | None, client) -> int:
     return max(1, int(window))
 
 
-def _temporary_file(out: str, ext: str) -> tuple[str, str | None]:
+def temporary_file(out: str, ext: str) -> tuple[str, str | None]:
     """Where the file is written before it is complete, and the temporary folder to remove after (or None):
     a hidden name beside a local ``out``, a local temporary folder for a URL."""
     if paths.is_local(out):
@@ -138,7 +138,7 @@ def _write_file(tmp: str, header: laspy.LasHeader, evlrs: list, jobs: list[UnitJ
     the header statistics and the EVLRs, into the file ``tmp``; returns the points written."""
     written = 0
     with open(tmp, "wb") as f:
-        writer = _LasWriter(f, header, do_compress=compress, closefd=False)
+        writer = ChunkedLasWriter(f, header, do_compress=compress, closefd=False)
         tracked = tracked_extra_bytes(writer.header)
         extra: list = [None] * len(tracked)
         for data, chunks, stats in ordered_results(jobs, layout, scratch, store.storage_options, client,
@@ -156,7 +156,7 @@ def _write_file(tmp: str, header: laspy.LasHeader, evlrs: list, jobs: list[UnitJ
     return written
 
 
-def _publish(tmp: str, out: str, storage_options: dict[str, Any] | None) -> None:
+def publish_file(tmp: str, out: str, storage_options: dict[str, Any] | None) -> None:
     """Put the complete file in its place: renamed locally, uploaded under a temporary key and moved for a URL."""
     if paths.is_local(out):
         os.replace(tmp, paths.local_path(out))
@@ -167,19 +167,19 @@ def _publish(tmp: str, out: str, storage_options: dict[str, Any] | None) -> None
         fs.mv(tmp_key, p)
 
 
-class _ChunkTableWriter(IPointWriter):
+class ChunkTableWriter(IPointWriter):
     """laspy's point writer for a LAZ file whose chunks arrive already compressed
-    (:func:`tiles.export_units.gather_unit`).
+    (:func:`tiles.export_units.gather_unit`); ``variable``: chunks of any size (COPC, :mod:`tiles.copc`).
 
     Writes what lazrs's own compressor writes around the chunks: the LasZip VLR,
     the offset to the chunk table (patched at the end) and the chunk table.
     """
 
-    def __init__(self, dest, point_format: laspy.PointFormat):
+    def __init__(self, dest, point_format: laspy.PointFormat, variable: bool = False):
         import lazrs
 
         self.dest = dest
-        self.vlr = lazrs.LazVlr.new_for_compression(point_format.id, point_format.num_extra_bytes)
+        self.vlr = lazrs.LazVlr.new_for_compression(point_format.id, point_format.num_extra_bytes, variable)
         self.chunks: list[tuple[int, int]] = []
         self.table_offset_at = 0
         self.finished = False
@@ -215,11 +215,14 @@ class _ChunkTableWriter(IPointWriter):
         self.dest.seek(end)
 
 
-class _LasWriter(laspy.LasWriter):
-    """laspy's writer whose LAZ point writer is :class:`_ChunkTableWriter`."""
+class ChunkedLasWriter(laspy.LasWriter):
+    """laspy's writer whose LAZ point writer is :class:`ChunkTableWriter` (fixed-size chunks; variable-size with
+    ``variable_chunks`` set on the class, as :class:`tiles.copc.CopcWriter` does)."""
+
+    variable_chunks = False
 
     def _create_laz_backend(self, laz_backends) -> IPointWriter:
-        return _ChunkTableWriter(self.dest, self.header.point_format)
+        return ChunkTableWriter(self.dest, self.header.point_format, self.variable_chunks)
 
 
 def gather_points(store: TileStore, names: list[str] | None = None) -> dict[str, np.ndarray]:

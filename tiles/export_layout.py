@@ -25,6 +25,9 @@ from tiles.store import TileStore
 _NAME_LEN = 32
 #: The LAS 1.4 point format that holds everything of a legacy one (0-5): 64-76 need a full classification byte.
 LAS14_TWIN = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+#: The point format of a COPC file for each other format (COPC takes 6, 7 or 8 only; wave packet fields, of
+#: formats 4, 5, 9 and 10, become extra bytes).
+COPC_TWIN = {0: 6, 1: 6, 2: 7, 3: 7, 4: 6, 5: 7, 6: 6, 7: 7, 8: 8, 9: 6, 10: 8}
 #: Bumped when the exported file's layout changes (a resumed run then rewrites ``points.laz``).
 LAYOUT_VERSION = 2
 #: Degrees per unit of the LAS 1.4 ``scan_angle`` field (legacy ``scan_angle_rank`` is whole degrees).
@@ -68,15 +71,20 @@ class Layout:
         return ["x", "y", "z", "point_index"] + [c.store for c in self.columns]
 
 
-def plan_layout(store: TileStore, point_format: int | None = None) -> Layout:
-    """Decide the point format and where every store array goes (see docs/design/tiles.md, "What goes where")."""
+def plan_layout(store: TileStore, point_format: int | None = None, copc: bool = False) -> Layout:
+    """Decide the point format and where every store array goes (see docs/design/tiles.md, "What goes where");
+    ``copc``: a format COPC takes (6, 7 or 8, :data:`COPC_TWIN`)."""
     meta = store.meta
     fmt = point_format if point_format is not None else int((meta.las or {}).get("point_format", 7))
     if not 0 <= fmt <= 10:
         raise UserError(None, f"LAS point format must be 0-10, not {fmt}")
     has_result_class = any(d.name == "classification" and d.kind == "result" for d in meta.dimensions)
-    raised = has_result_class and fmt in LAS14_TWIN
-    if raised:
+    raised = (has_result_class or copc) and fmt in LAS14_TWIN
+    if copc:
+        if point_format is not None and fmt not in (6, 7, 8):
+            raise UserError(None, f"COPC takes point formats 6, 7 and 8, not {fmt}")
+        fmt = COPC_TWIN[fmt]
+    elif raised:
         if point_format is not None:
             raise UserError(None, f"the classes (LAS codes {LAS_CLASS_OFFSET}-{LAS_CLASS_OFFSET + 12}) do not fit "
                                   f"the 5-bit classification of point format {fmt}: export to a format >= 6")

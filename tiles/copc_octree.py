@@ -1,0 +1,210 @@
+"""The COPC octree of an export: the root cube, each point's cell, the groups of work and which node holds a point.
+
+Every point gets integer cell coordinates ``q`` on a ``2**BITS`` grid per axis
+of the cube (:func:`point_cells`); a node at level ``d`` is ``q >> (BITS - d)``.
+A node whose cube cell holds more than ``cap`` points (over the whole cloud) is
+*sampled*: it keeps one point per cell of a ``2**grid_bits`` grid of its own
+(the arriving point nearest the cell centre, ties to the smaller point index)
+and passes the rest to its children; any other node is a *leaf* and keeps every
+point that arrives.  So a node's points lie in its cube, coarse levels are an
+even sample and a leaf holds at most ``cap`` points.
+
+The work is cut in *groups* (:func:`plan_groups`): the largest nodes of at most
+``group_points`` points (at level ``grid_bits`` at the deepest).  A group's
+points are all a worker needs for the nodes inside it, and for its share of
+the *top* nodes above it, since each sampling cell of a top node lies inside
+one group.  Design: docs/design/tiles.md, "COPC".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Bits of the integer cell coordinates per axis (three of them pack into an int64).
+BITS = 21
+#: A sampled node keeps one point per cell of a ``2**GRID_BITS`` grid over it (128**3, as untwine and PDAL).
+GRID_BITS = 7
+
+
+@dataclass(frozen=True)
+class Cube:
+    """The root cube of the octree (world coordinates) and the sampling grid of a node."""
+
+    center: tuple[float, float, float]
+    halfsize: float
+    grid_bits: int = GRID_BITS
+
+    @property
+    def mins(self) -> np.ndarray:
+        return np.asarray(self.center, dtype=np.float64) - self.halfsize
+
+    @property
+    def depth(self) -> int:
+        """The deepest level: its nodes' sampling cells are the finest cells."""
+        return BITS - self.grid_bits
+
+    @property
+    def spacing(self) -> float:
+        """The distance between the root's points (COPC info ``spacing``): its sampling cell edge."""
+        return 2 * self.halfsize / (1 << self.grid_bits)
+
+    def bounds(self, level: int, key: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """World (min, max) corners of node ``key`` at ``level``."""
+        side = 2 * self.halfsize / (1 << level)
+        lo = self.mins + np.asarray(key, dtype=np.float64) * side
+        return lo, lo + side
+
+
+def cube_for(bounds: list[float], scale: list[float], grid_bits: int = GRID_BITS) -> Cube:
+    """The cube around world ``bounds`` ``[minx, miny, minz, maxx, maxy, maxz]``: centred, a hair larger."""
+    if not 1 <= grid_bits <= 10:
+        raise ValueError(f"grid_bits must be 1-10, not {grid_bits}")
+    lo, hi = np.asarray(bounds[:3], dtype=np.float64), np.asarray(bounds[3:], dtype=np.float64)
+    center = (lo + hi) / 2
+    half = float(np.max(hi - lo)) / 2
+    half = half * (1 + 2.0 ** -20) + float(max(scale))
+    return Cube(tuple(float(c) for c in center), half, grid_bits)  # type: ignore[arg-type]
+
+
+def point_cells(raw: dict[str, np.ndarray] | np.ndarray, scale, offset, cube: Cube) -> np.ndarray:
+    """Integer cell coordinates ``(n, 3)`` int64 on the ``2**BITS`` grid of the cube, of raw scaled integers
+    (``raw["X"]``... of LAS records or ``raw["x"]``... of store columns); world = raw * scale + offset."""
+    names = "XYZ" if "X" in _names(raw) else "xyz"
+    n = len(raw[names[0]])
+    q = np.empty((n, 3), dtype=np.int64)
+    top = (1 << BITS) - 1
+    k = float(1 << BITS) / (2 * cube.halfsize)
+    for i, a in enumerate(names):
+        w = np.asarray(raw[a], dtype=np.float64) * float(scale[i]) + float(offset[i])
+        t = np.floor((w - cube.mins[i]) * k)
+        q[:, i] = np.clip(t, 0, top).astype(np.int64)
+    return q
+
+
+def _names(raw) -> tuple[str, ...]:
+    return tuple(raw.dtype.names or ()) if isinstance(raw, np.ndarray) else tuple(raw)
+
+
+def pack(keys: np.ndarray) -> np.ndarray:
+    """Node keys ``(n, 3)`` (each < 2**BITS) as one int64 each; sorting them sorts by x, then y, then z."""
+    return (keys[:, 0] << (2 * BITS)) | (keys[:, 1] << BITS) | keys[:, 2]
+
+
+def unpack(packed: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`pack`."""
+    m = (1 << BITS) - 1
+    return np.stack([(packed >> (2 * BITS)) & m, (packed >> BITS) & m, packed & m], axis=1)
+
+
+def morton(keys: np.ndarray, level: int) -> np.ndarray:
+    """Morton codes of node keys at ``level`` (x in the lowest bit of each triple, as COPC numbers children):
+    the code of a node's parent is ``code >> 3``, so every node is a contiguous range of finer codes."""
+    code = np.zeros(len(keys), dtype=np.int64)
+    for b in range(level):
+        for i in range(3):
+            code |= ((keys[:, i] >> b) & 1) << (3 * b + i)
+    return code
+
+
+def demorton(code: int, level: int) -> tuple[int, int, int]:
+    """The key ``(x, y, z)`` of one Morton code at ``level``."""
+    out = [0, 0, 0]
+    for b in range(level):
+        for i in range(3):
+            out[i] |= ((code >> (3 * b + i)) & 1) << b
+    return out[0], out[1], out[2]
+
+
+@dataclass
+class Group:
+    """A unit of work: the node ``(level, key)``, the range ``[lo, hi)`` of its Morton codes at ``grid_bits``
+    and its point count."""
+
+    level: int
+    key: tuple[int, int, int]
+    lo: int
+    hi: int
+    count: int
+
+
+def plan_groups(codes: np.ndarray, counts: np.ndarray, cube: Cube, group_points: int) -> list[Group]:
+    """The groups of the whole cloud, in Morton order, from the point count per Morton code at level
+    ``grid_bits`` (``codes`` sorted, unique): the largest nodes holding at most ``group_points`` points,
+    nodes at level ``grid_bits`` whatever they hold.  The nodes above them are the top nodes (:func:`top_keys`)."""
+    K = cube.grid_bits
+    csum = np.r_[0, np.cumsum(counts)]
+    out: list[Group] = []
+    stack = [(0, 0)]
+    while stack:
+        level, code = stack.pop()
+        shift = 3 * (K - level)
+        lo, hi = code << shift, (code + 1) << shift
+        n = int(csum[np.searchsorted(codes, hi)] - csum[np.searchsorted(codes, lo)])
+        if n == 0:
+            continue
+        if n <= group_points or level == K:
+            out.append(Group(level, demorton(code, level), lo, hi, n))
+        else:
+            stack.extend((level + 1, code * 8 + c) for c in range(7, -1, -1))
+    out.sort(key=lambda g: g.lo)
+    return out
+
+
+def ancestors(level: int, key: tuple[int, int, int]) -> list[tuple[int, tuple[int, int, int]]]:
+    """The nodes above ``(level, key)``, root first."""
+    return [(d, (key[0] >> (level - d), key[1] >> (level - d), key[2] >> (level - d))) for d in range(level)]
+
+
+def assign_levels(q: np.ndarray, index: np.ndarray, group_level: int, cap: int, cube: Cube) -> np.ndarray:
+    """The level of the node holding each point of one group (``q`` its cells, ``index`` its point indices).
+
+    The nodes above the group (levels ``< group_level``) are sampled (they hold
+    more than ``group_points >= cap`` points); a node inside it is sampled when
+    its cell holds more than ``cap`` of the group's points (all of the cloud's
+    in that cell) and it is above the deepest level.
+    """
+    n = len(q)
+    level = np.full(n, -1, dtype=np.int8)
+    remaining = np.arange(n)
+    K = cube.grid_bits
+    for d in range(cube.depth + 1):
+        if not len(remaining):
+            break
+        if d < group_level:
+            sampled = np.ones(len(remaining), dtype=bool)
+        elif d == cube.depth:
+            sampled = np.zeros(len(remaining), dtype=bool)
+        else:
+            nodes, counts = np.unique(pack(q >> (BITS - d)), return_counts=True)
+            mine = np.searchsorted(nodes, pack(q[remaining] >> (BITS - d)))
+            sampled = counts[mine] > cap
+        level[remaining[~sampled]] = d
+        rest = remaining[sampled]
+        if not len(rest):
+            break
+        fine = BITS - d - K  # bits of q below a sampling cell of a level-d node
+        qr = q[rest]
+        cell = pack(qr >> fine)
+        off = 2 * (qr & ((1 << fine) - 1)) + 1 - (1 << fine)  # twice the offset from the cell centre
+        dist = np.sum(off * off, axis=1)
+        order = np.lexsort((index[rest], dist, cell))
+        sc = cell[order]
+        first = np.r_[True, sc[1:] != sc[:-1]]
+        level[rest[order[first]]] = d
+        remaining = np.sort(rest[order[~first]])
+    return level
+
+
+def node_order(q: np.ndarray, level: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points sorted by node (level, then x, y, z) and by point index in a node: ``(order, node starts, keys)``
+    with ``keys`` ``(nodes, 4)`` as ``(level, x, y, z)``."""
+    if not len(q):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 4), np.int64)
+    lv = level.astype(np.int64)
+    key = pack(q >> (BITS - lv)[:, None])
+    order = np.lexsort((index, key, lv))
+    k, lvs = key[order], lv[order]
+    starts = np.flatnonzero(np.r_[True, (k[1:] != k[:-1]) | (lvs[1:] != lvs[:-1])])
+    keys = np.column_stack([lvs[starts], unpack(k[starts])])
+    return order, starts, keys
