@@ -75,20 +75,8 @@ def plan_layout(store: TileStore, point_format: int | None = None, copc: bool = 
     """Decide the point format and where every store array goes (see docs/design/tiles.md, "What goes where");
     ``copc``: a format COPC takes (6, 7 or 8, :data:`COPC_TWIN`)."""
     meta = store.meta
-    fmt = point_format if point_format is not None else int((meta.las or {}).get("point_format", 7))
-    if not 0 <= fmt <= 10:
-        raise UserError(None, f"LAS point format must be 0-10, not {fmt}")
     has_result_class = any(d.name == "classification" and d.kind == "result" for d in meta.dimensions)
-    raised = (has_result_class or copc) and fmt in LAS14_TWIN
-    if copc:
-        if point_format is not None and fmt not in (6, 7, 8):
-            raise UserError(None, f"COPC takes point formats 6, 7 and 8, not {fmt}")
-        fmt = COPC_TWIN[fmt]
-    elif raised:
-        if point_format is not None:
-            raise UserError(None, f"the classes (LAS codes {LAS_CLASS_OFFSET}-{LAS_CLASS_OFFSET + 12}) do not fit "
-                                  f"the 5-bit classification of point format {fmt}: export to a format >= 6")
-        fmt = LAS14_TWIN[fmt]
+    fmt, raised = choose_format(int((meta.las or {}).get("point_format", 7)), point_format, has_result_class, copc)
     std = set(standard_names(fmt))
     subs = subfields(fmt)
     scale_colour = meta.las is None and meta.color_depth == 8
@@ -153,6 +141,25 @@ def plan_layout(store: TileStore, point_format: int | None = None, copc: bool = 
                                las)
             layout.columns.append(Column(d.name, "field", target))
     return layout
+
+
+def choose_format(source: int, point_format: int | None, has_result_class: bool, copc: bool) -> tuple[int, bool]:
+    """The output point format and whether it is a legacy one (0-5) raised to LAS 1.4: ``point_format`` if given,
+    else the ``source``'s, raised for a classification result (:data:`LAS14_TWIN`) or COPC (:data:`COPC_TWIN`)."""
+    fmt = point_format if point_format is not None else source
+    if not 0 <= fmt <= 10:
+        raise UserError(None, f"LAS point format must be 0-10, not {fmt}")
+    raised = (has_result_class or copc) and fmt in LAS14_TWIN
+    if copc:
+        if point_format is not None and fmt not in (6, 7, 8):
+            raise UserError(None, f"COPC takes point formats 6, 7 and 8, not {fmt}")
+        return COPC_TWIN[fmt], raised
+    if raised:
+        if point_format is not None:
+            raise UserError(None, f"the classes (LAS codes {LAS_CLASS_OFFSET}-{LAS_CLASS_OFFSET + 12}) do not fit "
+                                  f"the 5-bit classification of point format {fmt}: export to a format >= 6")
+        return LAS14_TWIN[fmt], raised
+    return fmt, raised
 
 
 def _std_column(store_name: str, lname: str, subs: dict[str, tuple[str, int]]) -> Column:

@@ -27,8 +27,8 @@ logger = logging.getLogger(__name__)
 _KINDS = ("run", "log", "export")
 _TEMPORARY = re.compile(r"^buildingparser-(run|log|export)-(\d+)-")
 #: Files published by a copy to ``.<name>.tmp`` then a rename (the run's outputs and its list of them).
-_PUBLISHED = ("points.laz", "spaces.geojson", "floorplan.png", "elements.json", "metrics.json", "report.html",
-              "dask-report.html", ".buildingparser-outputs.json")
+_PUBLISHED = ("points.laz", "points.copc.laz", "spaces.geojson", "floorplan.png", "elements.json", "metrics.json",
+              "report.html", "dask-report.html", ".buildingparser-outputs.json")
 _SCRATCH = re.compile(r"^\..+\.(export|tmp)-[0-9a-f]{8}$|^\.(" + "|".join(map(re.escape, _PUBLISHED)) + r")\.tmp$")
 
 

@@ -19,7 +19,8 @@ update from the detected walls -> per-point labels -> outputs and metrics.
 
 Writes into DIR: points.laz (every input point, input order, all input
 dimensions plus classification = 64 + class code, element_class, space_id,
-element_id), spaces.geojson and spaces.gpkg (in the input's CRS),
+element_id), points.copc.laz (the same points as a COPC octree for web
+viewers and QGIS), spaces.geojson and spaces.gpkg (in the input's CRS),
 floorplan.png, elements.json, metrics.json (ARI and AP when the input has
 ground truth), report.html, buildingparser.log (every message of the run,
 with timestamps), and store.zarr (the tile store) unless INPUT is a store
@@ -45,6 +46,8 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-crf", action="store_true", help="keep every detection proposal (skip the CRF)")
     p.add_argument("--no-update", action="store_true", help="do not update the spaces from detected walls")
     p.add_argument("--no-points", action="store_true", help="do not write points.laz")
+    p.add_argument("--no-copc", action="store_true",
+                   help="do not write points.copc.laz, the COPC octree for web viewers (buildingparser.outputs.copc)")
     p.add_argument("--no-ifc", action="store_true", help="do not write building.ifc (buildingparser.outputs.ifc)")
     p.add_argument("--no-viewer", action="store_true",
                    help="do not write viewer.html, the 3D view (buildingparser.outputs.viewer)")
@@ -74,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
         logger.debug("run %s --out %s: %s", args.input, args.out, options)
         with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
             check_reachable(client, args.input, args.out, args.store)
-            off = {f"buildingparser.outputs.{k}": False for k, no in (("ifc", args.no_ifc), ("viewer", args.no_viewer))
-                   if no}
+            off = {f"buildingparser.outputs.{k}": False
+                   for k, no in (("ifc", args.no_ifc), ("viewer", args.no_viewer), ("copc", args.no_copc)) if no}
             with dask.config.set(off) if off else contextlib.nullcontext():
                 metrics = run_pipeline(args.input, args.out, client=client, options=options)
                 lines = summary_lines(metrics, args.out)

@@ -60,8 +60,8 @@ from tiles.classes import ELEMENT_CLASSES
 REPORT = "report.html"
 #: CRF solver statuses of spaces solved exactly (see :mod:`engine.crf.model`).
 SOLVED = ("OPTIMAL", "TRIVIAL", "EMPTY")
-OUTPUTS = ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
-           "viewer.html", "elements.json", "metrics.json", "dask-report.html")
+OUTPUTS = ("points.laz", "points.copc.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg",
+           "building.ifc", "viewer.html", "elements.json", "metrics.json", "dask-report.html")
 
 _CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:2rem auto;max-width:72rem;

@@ -17,7 +17,7 @@ from engine.pipeline.stages import StageLog, StageRecord, Timer, failures_record
 from tiles.store import TileStore
 
 #: Stages in order; redoing one invalidates the records of every later one.
-STAGES = ("ingest", "spaces", "detection", "crf", "space_update", "labels", "export")
+STAGES = ("ingest", "spaces", "detection", "crf", "space_update", "labels", "export", "copc")
 
 T = TypeVar("T")
 

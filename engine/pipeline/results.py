@@ -206,9 +206,11 @@ def summary_lines(metrics: dict[str, Any], out: str) -> list[str]:
                      f"{pct(d['map_before_crf'])}{ranked}; point mIoU {pct(d['miou'])}")
         lines.append("AP per class: " + ", ".join(f"{k} {pct(v)}" for k, v in d["ap"].items()))
     lines.append("elements: " + (", ".join(f"{k} {v}" for k, v in metrics.get("elements", {}).items()) or "none"))
-    names = ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
+    names = ("points.laz", "points.copc.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
              "viewer.html", "elements.json", "metrics.json", "report.html")
-    off = {"points.laz": not metrics.get("points_written", True), "building.ifc": not setting("outputs.ifc"),
+    off = {"points.laz": not metrics.get("points_written", True),
+           "points.copc.laz": not (metrics.get("points_written", True) and setting("outputs.copc")),
+           "building.ifc": not setting("outputs.ifc"),
            "viewer.html": not setting("outputs.viewer")}
     written = [n for n in names if not off.get(n)]
     for name in written:

@@ -7,6 +7,8 @@
 ``points.laz``     every input point in input order with its input dimensions, plus
                    ``classification`` (64 + code), ``element_class``, ``space_id``, ``element_id``
                    (:mod:`tiles.export`)
+``points.copc.laz`` the same points in a COPC octree for web viewers and QGIS (:mod:`tiles.copc`;
+                   ``buildingparser.outputs.copc``)
 ``spaces.geojson`` one feature per space, world coordinates, with the space statistics (CRS member GDAL reads)
 ``spaces.gpkg``    the same as a GeoPackage with its CRS (:mod:`engine.outputs.geojson`)
 ``floorplan.png``  the plan per storey (and ``floorplan.svg``): spaces, walls, doors, windows (:mod:`engine.outputs.plan`)
@@ -43,6 +45,7 @@ from engine.pipeline.documents import (
 )
 from engine.pipeline.outfolder import claim_output_folder, record_written
 from engine.pipeline.plausible import check_cloud, check_parsable
+from engine.pipeline.points import start_export
 from engine.pipeline.provenance import Provenance
 from engine.pipeline.results import (
     all_timings,
@@ -142,7 +145,7 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tu
     store.refresh()
     fp_export = fingerprint("export", {"path": paths.join(ctx.out, "points.laz"), "layout": LAYOUT_VERSION},
                             fp_labels, fp_update)
-    export_job = _start_export(ctx, fp_export)
+    export_job = start_export(ctx, fp_export)
     try:
         with quiet_progress(export_job is not None):
             with Timer() as t:
@@ -289,32 +292,6 @@ def _labels_stage(ctx: RunContext, elements: list, fp_crf: str, fp_update: str) 
     if seconds is not None:
         logger.info("labels: classification and element_id written (%.1f s)", seconds)
     return fp
-
-
-def _start_export(ctx: RunContext, fp_export: str):
-    """Write ``points.laz`` in a thread of the driver; returns its future (None when there is nothing to do)."""
-    opt = ctx.options
-    if not opt.export_points:
-        return None
-    target = paths.join(ctx.out, "points.laz")
-    if ctx.skip("export", fp_export) and paths.exists(target, opt.storage_options):
-        logger.info("points.laz: up to date (skipped)")
-        return None
-    from concurrent.futures import ThreadPoolExecutor
-
-    from tiles.export import export
-
-    def job() -> None:
-        _, seconds = ctx.record("export", fp_export, lambda: export(
-            ctx.store, target, client=ctx.client, overwrite=True, storage_options=opt.storage_options))
-        record_written(ctx.out, ["points.laz"])
-        logger.info("points.laz: %s points (%.1f s)", f"{ctx.store.meta.point_count:,}", seconds)
-
-    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="buildingparser-export")
-    try:
-        return pool.submit(job)
-    finally:
-        pool.shutdown(wait=False)  # the thread ends with its job
 
 
 def _ingest_stage(input: str, out: str, client, opt: RunSettings,
