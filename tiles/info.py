@@ -65,7 +65,7 @@ def file_info(path: str, storage_options: dict[str, Any] | None = None) -> dict[
             "grid": None if grid is None else {"scale": list(grid.scale), "offset": list(grid.offset)},
             "details": r.source_info([]),
         }
-        if r.format in ("las", "laz"):
+        if r.format in ("las", "laz", "copc"):
             d["bounds"] = _las_bounds(r.path, storage_options)
         out.append(d)
     return {"path": path, "sources": out}
@@ -85,7 +85,8 @@ def format_file_info(info: dict[str, Any]) -> str:
     lines = []
     for s in info["sources"]:
         n = f"{s['points']:,} points" if s["points"] is not None else "points counted when read"
-        lines.append(f"file        {s['path']} ({s['format']}, {n})")
+        what = "COPC: LAZ with an octree, read in file order" if s["format"] == "copc" else s["format"]
+        lines.append(f"file        {s['path']} ({what}, {n})")
         if s.get("bounds"):
             b = s["bounds"]
             lines.append("bounds      " + " ".join(f"{v:.3f}" for v in b["min"]) + "  to  "

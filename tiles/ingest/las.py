@@ -10,9 +10,11 @@ a file with ground-truth arrays (the generator writes one) becomes the store's
 ``meta/ground_truth`` document.
 
 Waveform data packets stored inside the file are not carried (a warning says
-so); the per-point wave packet fields are kept.  COPC files are read as LAZ
-in their stored point order; their octree records are dropped (export writes
-plain LAZ).
+so); the per-point wave packet fields are kept.  A COPC file (its info VLR
+first, :mod:`tiles.ingest.copc`) has the format ``copc`` and is read as LAZ,
+whole chunks (octree nodes) in file order, so its points keep their order in
+the file; its octree records are not carried (``points.copc.laz`` gets a new
+octree).
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ import numpy as np
 
 from tiles import scratch
 from tiles.errors import UserError
+from tiles.ingest.copc import copc_info
 from tiles.ingest.files import check_file, file_size, open_binary
 from tiles.ingest.lasformat import bit_shift, crs_of, header_facts, point_dimensions
 from tiles.ingest.reader import PartResult, Quantization, Reader
@@ -48,7 +51,8 @@ class LasReader(Reader):
             except Exception as exc:  # noqa: BLE001 - laspy raises several kinds on a bad header
                 raise UserError(path, f"unreadable LAS header ({type(exc).__name__}: {exc})") from None
             self.compressed = bool(header.are_points_compressed)
-            self.format = "laz" if self.compressed else "las"
+            self.copc = self.compressed and copc_info(header) is not None
+            self.format = "copc" if self.copc else "laz" if self.compressed else "las"
             self.point_format_id = int(header.point_format.id)
             self.record_length = int(header.point_format.size)
             self.dtype = header.point_format.dtype()
@@ -300,6 +304,8 @@ class LasReader(Reader):
         info: dict[str, Any] = {"las": {k: v for k, v in self._facts.items() if k not in ("vlrs", "evlrs")}}
         info["las"]["vlr_count"] = len(self._facts["vlrs"])
         info["las"]["evlr_count"] = len(self._facts["evlrs"])
+        if self.copc:
+            info["copc"] = True
         worst = max((s.get("rounding", 0.0) for s in stats), default=0.0)
         if worst:
             info["requantized_max_error_m"] = worst

@@ -110,7 +110,7 @@ def header_facts(header: laspy.LasHeader) -> tuple[dict[str, Any], bool]:
         if key in _REGENERATED:
             continue
         if v.user_id == "copc":
-            dropped.append(f"COPC record {v.record_id} (export writes plain LAZ)")
+            dropped.append(f"COPC record {v.record_id} (points.copc.laz gets a new octree)")
             continue
         vlrs.append(vlr_to_json(v))
     evlrs = []
@@ -120,7 +120,7 @@ def header_facts(header: laspy.LasHeader) -> tuple[dict[str, Any], bool]:
             dropped.append("waveform data packets (EVLR)")
             continue
         if v.user_id == "copc":
-            dropped.append(f"COPC record {v.record_id} (export writes plain LAZ)")
+            dropped.append(f"COPC record {v.record_id} (points.copc.laz gets a new octree)")
             continue
         evlrs.append(vlr_to_json(v))
     ge = header.global_encoding
