@@ -19,7 +19,7 @@ from tests.engine.pipeline.logged import logged
 from tiles.store import open_store
 from tiles.tasks import TaskFailures
 
-OUTPUTS = ("points.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
+OUTPUTS = ("points.laz", "points.copc.laz", "spaces.geojson", "spaces.gpkg", "floorplan.png", "floorplan.svg", "building.ifc",
            "viewer.html", "elements.json", "metrics.json", "report.html")
 
 
@@ -62,6 +62,12 @@ def test_run_writes_every_output_and_keeps_every_point_in_order(building, first_
     np.testing.assert_array_equal(res["element_class"], res["classification"] - 64)
     with laspy.open(out / "points.laz") as f:
         assert f.header.vlrs.get("ClassificationLookupVlr")[0].lookups[66] == "wall"
+    with laspy.CopcReader.open(str(out / "points.copc.laz")) as r:  # the same points, in an octree
+        copc = r.query()
+        assert r.header.point_count == len(src["X"])
+        np.testing.assert_array_equal(np.sort(np.asarray(copc.X)), np.sort(src["X"]))
+        np.testing.assert_array_equal(np.bincount(np.asarray(copc["space_id"]) + 1),
+                                      np.bincount(res["space_id"] + 1))
     assert metrics["input"]["points"] == len(src["X"])
     import hashlib
 
@@ -113,7 +119,8 @@ def test_rerun_skips_finished_stages_and_gives_the_same_outputs(building, first_
     out, metrics, _ = first_run
     before = {n: (out / n).read_bytes() for n in ("elements.json", "spaces.geojson")}
     again = run(str(laz), str(out), client=client, options=RunSettings(model=model))
-    assert {"ingest", "spaces", "detection", "crf", "space_update", "labels", "export"} <= set(again["skipped"])
+    assert {"ingest", "spaces", "detection", "crf", "space_update", "labels", "export",
+            "copc"} <= set(again["skipped"])
     assert again["spaces"] == metrics["spaces"] and again["detection"]["ap"] == metrics["detection"]["ap"]
     for n, b in before.items():
         assert (out / n).read_bytes() == b, n
