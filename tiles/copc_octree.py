@@ -97,14 +97,23 @@ def unpack(packed: np.ndarray) -> np.ndarray:
     return np.stack([(packed >> (2 * BITS)) & m, (packed >> BITS) & m, packed & m], axis=1)
 
 
+def _spread(v: np.ndarray) -> np.ndarray:
+    """The low 21 bits of ``v`` moved to every third bit (bit ``b`` to bit ``3 b``)."""
+    v = v & 0x1FFFFF
+    v = (v | (v << 32)) & 0x1F00000000FFFF
+    v = (v | (v << 16)) & 0x1F0000FF0000FF
+    v = (v | (v << 8)) & 0x100F00F00F00F00F
+    v = (v | (v << 4)) & 0x10C30C30C30C30C3
+    return (v | (v << 2)) & 0x1249249249249249
+
+
 def morton(keys: np.ndarray, level: int) -> np.ndarray:
     """Morton codes of node keys at ``level`` (x in the lowest bit of each triple, as COPC numbers children):
     the code of a node's parent is ``code >> 3``, so every node is a contiguous range of finer codes."""
-    code = np.zeros(len(keys), dtype=np.int64)
-    for b in range(level):
-        for i in range(3):
-            code |= ((keys[:, i] >> b) & 1) << (3 * b + i)
-    return code
+    if not 0 <= level <= BITS:
+        raise ValueError(f"level must be 0-{BITS}, not {level}")
+    k = np.asarray(keys, dtype=np.int64) & ((1 << level) - 1)
+    return _spread(k[:, 0]) | (_spread(k[:, 1]) << 1) | (_spread(k[:, 2]) << 2)
 
 
 def demorton(code: int, level: int) -> tuple[int, int, int]:
@@ -162,38 +171,55 @@ def assign_levels(q: np.ndarray, index: np.ndarray, group_level: int, cap: int, 
     The nodes above the group (levels ``< group_level``) are sampled (they hold
     more than ``group_points >= cap`` points); a node inside it is sampled when
     its cell holds more than ``cap`` of the group's points (all of the cloud's
-    in that cell) and it is above the deepest level.
+    in that cell) and it is above the deepest level.  The points are sorted once
+    by Morton code at the finest level: every node and every sampling cell is
+    then a run, and each level costs a few passes, no sort.
     """
     n = len(q)
+    code = morton(q, BITS)
+    srt = np.argsort(code, kind="stable")
+    code, q, index = code[srt], q[srt], np.asarray(index)[srt]
     level = np.full(n, -1, dtype=np.int8)
-    remaining = np.arange(n)
-    K = cube.grid_bits
+    alive = np.ones(n, dtype=bool)
     for d in range(cube.depth + 1):
-        if not len(remaining):
+        rem = np.flatnonzero(alive)
+        if not len(rem):
             break
-        if d < group_level:
-            sampled = np.ones(len(remaining), dtype=bool)
-        elif d == cube.depth:
-            sampled = np.zeros(len(remaining), dtype=bool)
+        if d < group_level or d == cube.depth:
+            sampled = np.full(len(rem), d < group_level)
         else:
-            nodes, counts = np.unique(pack(q >> (BITS - d)), return_counts=True)
-            mine = np.searchsorted(nodes, pack(q[remaining] >> (BITS - d)))
-            sampled = counts[mine] > cap
-        level[remaining[~sampled]] = d
-        rest = remaining[sampled]
-        if not len(rest):
-            break
-        fine = BITS - d - K  # bits of q below a sampling cell of a level-d node
-        qr = q[rest]
-        cell = pack(qr >> fine)
-        off = 2 * (qr & ((1 << fine) - 1)) + 1 - (1 << fine)  # twice the offset from the cell centre
-        dist = np.sum(off * off, axis=1)
-        order = np.lexsort((index[rest], dist, cell))
-        sc = cell[order]
-        first = np.r_[True, sc[1:] != sc[:-1]]
-        level[rest[order[first]]] = d
-        remaining = np.sort(rest[order[~first]])
-    return level
+            run_id, counts = _runs(code >> (3 * (BITS - d)))
+            sampled = counts[run_id[rem]] > cap
+        level[rem[~sampled]] = d
+        alive[rem[~sampled]] = False
+        rest = rem[sampled]
+        if len(rest):
+            chosen = rest[_nearest_per_cell(code[rest], q[rest], index[rest], BITS - d - cube.grid_bits)]
+            level[chosen] = d
+            alive[chosen] = False
+    out = np.empty(n, dtype=np.int8)
+    out[srt] = level
+    return out
+
+
+def _runs(sorted_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The run number of every element of sorted keys, and the length of every run."""
+    new = np.r_[True, sorted_keys[1:] != sorted_keys[:-1]] if len(sorted_keys) else np.zeros(0, bool)
+    run_id = np.cumsum(new) - 1
+    return run_id, np.bincount(run_id, minlength=int(run_id[-1]) + 1 if len(run_id) else 0)
+
+
+def _nearest_per_cell(code: np.ndarray, q: np.ndarray, index: np.ndarray, fine: int) -> np.ndarray:
+    """Positions of the chosen point of each sampling cell (cells of ``fine`` bits of ``q``; ``code`` sorted):
+    the one nearest the cell centre, ties to the smallest ``index``."""
+    cell = code >> (3 * fine)
+    off = 2 * (q & ((1 << fine) - 1)) + 1 - (1 << fine)  # twice the offset from the cell centre
+    dist = np.sum(off * off, axis=1)
+    seg = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+    sizes = np.diff(np.r_[seg, len(cell)])
+    nearest = dist == np.repeat(np.minimum.reduceat(dist, seg), sizes)
+    idx = np.where(nearest, index, np.iinfo(np.int64).max)
+    return np.flatnonzero(nearest & (index == np.repeat(np.minimum.reduceat(idx, seg), sizes)))
 
 
 def node_order(q: np.ndarray, level: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

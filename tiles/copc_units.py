@@ -48,7 +48,10 @@ def stage_tile(tile: TileInfo, store: TileStore, layout: Layout, scratch: str,
     index = cols["point_index"].astype(np.int64, copy=False)
     q = point_cells(cols, meta.scale, meta.offset, cube)
     codes = morton(q >> (BITS - cube.grid_bits), cube.grid_bits)
-    order = np.lexsort((index, codes))
+    if len(index) < 2 or np.all(index[1:] > index[:-1]):  # an ingested tile is in point order already
+        order = np.argsort(codes.astype(np.int32), kind="stable")
+    else:
+        order = np.lexsort((index, codes))
     records = pack_part(cols, layout)[order]
     write_bytes(paths.join(scratch, f"{tile.name}.rec"), records, store.storage_options)
     write_bytes(paths.join(scratch, f"{tile.name}.idx"), index[order], store.storage_options)
