@@ -33,7 +33,8 @@ def _store(path: str | None, quick: bool, client) -> Any:
 
     if path:
         return open_store(path)
-    return generated_store(QUICK if quick else DEMO, 300.0 if quick else None, client)  # None: the demo's density
+    density: Any = 300.0 if quick else None  # None: the demo's density
+    return generated_store(QUICK if quick else DEMO, density, client)
 
 
 def run(quick: bool = False, store: str | None = None, repeat: int = 1) -> dict[str, Any]:
