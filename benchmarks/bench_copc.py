@@ -9,6 +9,10 @@ COPC its octree (nodes, levels, groups); tracked: the COPC write's multiple of
 the points.laz write (lower is better), measured in the same run so that the
 machine's load moves both sides.  The COPC file is checked to read back
 (laspy's CopcReader, every point).
+
+Measured (2026-12-03, quiet machine, ``--store`` the demo run's store with its
+results, ``--repeat 3``): 7,117,544 points, points.laz 5.94 s, points.copc.laz
+9.53 s (x1.6; 222 nodes, 5 levels, 8 groups), 65.9 and 65.0 MiB.
 """
 from __future__ import annotations
 

@@ -45,7 +45,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="redo every stage even when its earlier result is current")
     p.add_argument("--no-crf", action="store_true", help="keep every detection proposal (skip the CRF)")
     p.add_argument("--no-update", action="store_true", help="do not update the spaces from detected walls")
-    p.add_argument("--no-points", action="store_true", help="do not write points.laz")
+    p.add_argument("--no-points", action="store_true", help="do not write points.laz (nor points.copc.laz)")
     p.add_argument("--no-copc", action="store_true",
                    help="do not write points.copc.laz, the COPC octree for web viewers (buildingparser.outputs.copc)")
     p.add_argument("--no-ifc", action="store_true", help="do not write building.ifc (buildingparser.outputs.ifc)")
