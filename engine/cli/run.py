@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     import dask
 
     from engine.cli.logs import run_log
-    from engine.pipeline.cluster import cluster_client
+    from engine.pipeline.cluster import cluster_client, scheduler_address
     from engine.pipeline.clusterstart import ClusterStart
 
     # the cluster starts in a thread while the run imports the engine, checks the input, claims DIR and loads
@@ -76,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
                               update=not args.no_update, export_points=not args.no_points,
                               tile_size=args.tile_size, storage_options=args.storage_options)
         check_run_inputs(args.input, options)  # a missing input is refused before DIR is made
+        if scheduler_address(args.scheduler):  # an existing cluster: only connecting, which may fail (one line)
+            starting.client()  # ... before DIR is made
         # the output folder next: unwritable, taken by another run or holding the user's files -> one line, no work
         with claim_output_folder(args.out, force=args.force), run_log(args.out, args.storage_options):
             logger.debug("run %s --out %s: %s", args.input, args.out, options)

@@ -62,6 +62,17 @@ def test_a_missing_input_exits_2_fast_closes_the_cluster_and_makes_nothing(tmp_p
         assert not (tmp_path / "out").exists()
 
 
+def test_an_unreachable_scheduler_is_one_line_before_the_folder_is_made(tmp_path, capsys):
+    import dask
+
+    laz = tmp_path / "in.laz"
+    laz.write_bytes(b"")  # exists: the input's own check is not what fails
+    with dask.config.set({"buildingparser.connect-timeout": "1s"}):
+        assert main(["run", str(laz), "--out", str(tmp_path / "out"), "--scheduler", "tcp://127.0.0.1:9"]) == 2
+    assert "cannot reach the dask scheduler" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
 def test_off_a_terminal_a_run_shows_one_line_per_stage(tmp_path, client, capsys):
     from engine.synth.api import generate
 
