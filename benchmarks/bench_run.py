@@ -18,9 +18,13 @@ with the targets (whole run <= 8x, detection <= 3x, spaces <= 2x, export
 workers x wall seconds; 1.0 = every worker busy the whole stage).  The whole
 run's and the large stages' multiples are tracked in the nightly history
 (lower is better), with the run's ARI and mAP as quality.  Also reported: the
-bare I/O floor (laspy decoding the LAZ and encoding it again with three extra
-dimensions, what ``points.laz`` adds, on one process).  With ``--workers 1,2``
-the 2-worker speed-up is printed too, without a target: on a 2-core host it is
+export's median seconds over laspy's parallel LAZ encode of the same points
+(each run's ``points.laz`` written again by laspy with the lazrs parallel
+backend, timed after each run; ``export_x_encode``, target <= 2x, table
+``versus_encode``, :mod:`benchmarks.encode_reference`); the bare I/O floor
+(laspy decoding the LAZ and encoding it again with three extra dimensions,
+what ``points.laz`` adds, on one process).  With ``--workers 1,2`` the
+2-worker speed-up is printed too, without a target: on a 2-core host it is
 set by the host (the driver shares the cores with the workers).
 
 Where each stage's time goes (the ``profile`` table, per cluster size and
@@ -56,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import common
+from benchmarks.encode_reference import encode_row, encode_seconds
 
 QUICK = {"area": 60.0, "density": 1500.0, "floors": 1, "workers": (2,)}
 FULL = {"area": 600.0, "density": None, "floors": 1, "workers": (2,)}
@@ -375,6 +380,7 @@ def _measure_all(source: str, work: str, p: dict[str, Any], model: str | None, s
     totals: dict[int, list[float]] = {w: [] for w in p["workers"]}
     stage_seconds: dict[str, list[float]] = {}
     decodes: list[float] = []
+    encodes: list[float] = []  # laspy's parallel encode of each run's points.laz (issue 29 item 4)
     top = max(p["workers"])
     for rep in range(repeat):
         if not store:
@@ -386,6 +392,9 @@ def _measure_all(source: str, work: str, p: dict[str, Any], model: str | None, s
             if w == top:
                 for stage, sec in {**r["metrics"]["timings"], "whole run": r["seconds"]}.items():
                     stage_seconds.setdefault(stage, []).append(sec)
+                laz = os.path.join(work, f"out-{w}w", "points.laz")
+                if "export" in r["metrics"]["timings"] and os.path.exists(laz):
+                    encodes.append(encode_seconds(laz, work))
             if rep < repeat - 1:
                 continue  # the stage table and profile are the last repetition's
             runs[w] = r
@@ -413,7 +422,12 @@ def _measure_all(source: str, work: str, p: dict[str, Any], model: str | None, s
                 key = "run_x_decode" if row["stage"] == "whole run" else f"{row['stage']}_x_decode"
                 summary[key] = row["x_decode"]
                 tracked[key] = {"value": row["x_decode"], "better": "lower", "kind": "speed"}
-    return {"name": "run", "rows": rows, "summary": summary, "versus_decode": versus, "tasks": tasks,
+    versus_encode = [encode_row(stage_seconds["export"], encodes)] if encodes else []
+    if versus_encode:
+        summary.update({"encode_s": [round(v, 2) for v in encodes], "export_x_encode": versus_encode[0]["x_encode"]})
+        tracked["export_x_encode"] = {"value": versus_encode[0]["x_encode"], "better": "lower", "kind": "speed"}
+    return {"name": "run", "rows": rows, "summary": summary, "versus_decode": versus,
+            "versus_encode": versus_encode, "tasks": tasks,
             "profile": profiles, "tracked": tracked, "best_seconds": float(np.median(totals[top]))}
 
 
@@ -453,6 +467,8 @@ def main() -> None:
     common.report(result)
     if result["versus_decode"]:
         print(common.format_table(result["versus_decode"]))
+    if result["versus_encode"]:
+        print(common.format_table(result["versus_encode"]))
     print(common.format_table(result["tasks"]))
     print(common.format_table(result["profile"]))
     if a.json:

@@ -98,10 +98,13 @@ def unit_stats(arr: np.ndarray, pf: laspy.PointFormat, tracked: list[tuple[str, 
     one-element field's from the first record written only).
     """
     n = len(arr)
-    mins = [int(arr[c].min()) for c in "XYZ"] if n else [0, 0, 0]
-    maxs = [int(arr[c].max()) for c in "XYZ"] if n else [0, 0, 0]
+    xyz = [value_range(arr[c]) for c in "XYZ"] if n else [(0, 0)] * 3
+    mins, maxs = [int(lo) for lo, _ in xyz], [int(hi) for _, hi in xyz]
     names = arr.dtype.names or ()
-    gps = (float(arr["gps_time"].min()), float(arr["gps_time"].max())) if n and "gps_time" in names else None
+    gps = None
+    if n and "gps_time" in names:
+        g_lo, g_hi = value_range(arr["gps_time"])
+        gps = (float(g_lo), float(g_hi))
     rn = np.asarray(laspy.PackedPointRecord(arr, pf).return_number)
     returns = np.bincount(rn, minlength=16)[:16].astype(np.int64)
     extra: list[tuple[np.ndarray, np.ndarray] | None] = []
@@ -114,10 +117,18 @@ def unit_stats(arr: np.ndarray, pf: laspy.PointFormat, tracked: list[tuple[str, 
             if not len(col):
                 ok = False
                 break
-            lo.append(col.min())
-            hi.append(col.max())
+            a, b = value_range(col)
+            lo.append(a)
+            hi.append(b)
         extra.append((np.asarray(lo), np.asarray(hi)) if ok else None)
     return UnitStats(n, mins, maxs, gps, returns, extra)
+
+
+def value_range(field: np.ndarray) -> tuple[Any, Any]:
+    """Minimum and maximum of a record field: copied out of the records first (a field of packed LAS records
+    is strided and unaligned, and numpy reduces a contiguous copy twice as fast as the field itself)."""
+    col = np.ascontiguousarray(field)
+    return col.min(), col.max()
 
 
 def grow_header(header: laspy.LasHeader, s: UnitStats, extra: list) -> None:

@@ -4,7 +4,7 @@ Step 1, one task per tile (:func:`pack_tile`): read the whole tile, pack it as
 LAS records and stage them with their ``point_index``, in input order, in a
 scratch folder.  Step 2, one task per unit (:func:`gather_unit`): read the
 unit's byte range of every tile's staged file, sort the records back into
-input order, compute the unit's header statistics and, for LAZ, compress its
+input order (one scatter, :func:`unit_records`), compute the unit's header statistics and, for LAZ, compress its
 chunks.  :func:`ordered_results` keeps a bounded window of unit tasks in
 flight and yields their results in order.  Why it is built so:
 docs/design/tiles.md, "Exporting".
@@ -110,22 +110,7 @@ def gather_unit(job: UnitJob, layout: Layout, scratch: str, storage_options: dic
     k, first, count, runs = job
     pf = layout.point_format_obj()
     dtype = pf.dtype()
-    size = dtype.itemsize
-    recs, idx = [], []
-    for tile, start, stop in runs:
-        raw = read_range(paths.join(scratch, f"{tile}.rec"), start * size, (stop - start) * size, storage_options)
-        recs.append(np.frombuffer(raw, dtype=dtype))
-        raw = read_range(paths.join(scratch, f"{tile}.idx"), start * 8, (stop - start) * 8, storage_options)
-        idx.append(np.frombuffer(raw, dtype=np.int64))
-    if len(recs) == 1:
-        arr, got = recs[0], idx[0]
-    else:
-        got = np.concatenate(idx) if idx else np.zeros(0, np.int64)
-        order = np.argsort(got, kind="stable")
-        arr = np.concatenate(recs)[order] if recs else np.zeros(0, dtype=dtype)
-        got = got[order]
-    if len(got) != count or (count and (got[0] != first or np.any(np.diff(got) != 1))):
-        raise RuntimeError(f"export unit {k}: its staged points are not the indices {first}..{first + count - 1}")
+    arr = unit_records(job, dtype, scratch, storage_options)
     stats = unit_stats(arr, pf, tracked)
     if not compress:
         return np.ascontiguousarray(arr).tobytes(), [], stats
@@ -144,6 +129,33 @@ def gather_unit(job: UnitJob, layout: Layout, scratch: str, storage_options: dic
     if sum(c for c, _ in chunks) != count or 8 + sum(b for _, b in chunks) != table_at:
         raise RuntimeError(f"export unit {k}: unexpected LAZ chunk layout")
     return bytes(blob[8:table_at]), chunks, stats
+
+
+def unit_records(job: UnitJob, dtype: np.dtype, scratch: str, storage_options: dict[str, Any] | None) -> np.ndarray:
+    """A unit's records in input order: each tile's staged rows put at their ``point_index - first``.
+
+    One pass over the records (a scatter of fixed-size byte records), not a sort
+    of them: the unit's indices are exactly ``first .. first + count - 1``, which
+    is checked (every position in range and taken once).
+    """
+    k, first, count, runs = job
+    size = dtype.itemsize
+    records = np.dtype((np.void, size))  # plain bytes: numpy moves them faster than a record of named fields
+    out = np.empty(count, records)
+    taken = np.zeros(count, bool)
+    n = 0
+    for tile, start, stop in runs:
+        raw = read_range(paths.join(scratch, f"{tile}.rec"), start * size, (stop - start) * size, storage_options)
+        raw_idx = read_range(paths.join(scratch, f"{tile}.idx"), start * 8, (stop - start) * 8, storage_options)
+        pos = np.frombuffer(raw_idx, dtype=np.int64) - first
+        if len(pos) and (pos.min() < 0 or pos.max() >= count):
+            raise RuntimeError(f"export unit {k}: a staged point is outside the indices {first}..{first + count - 1}")
+        out[pos] = np.frombuffer(raw, dtype=records)
+        taken[pos] = True
+        n += len(pos)
+    if n != count or not taken.all():
+        raise RuntimeError(f"export unit {k}: its staged points are not the indices {first}..{first + count - 1}")
+    return out.view(dtype)
 
 
 def ordered_results(jobs: list[UnitJob], layout: Layout, scratch: str, storage_options: dict[str, Any] | None,

@@ -61,26 +61,34 @@ def run(args: argparse.Namespace) -> int:
     import dask
 
     from engine.cli.logs import run_log
-    from engine.pipeline.cluster import check_reachable, cluster_client
-    from engine.pipeline.context import check_run_inputs
-    from engine.pipeline.outfolder import claim_output_folder
-    from engine.pipeline.results import summary_lines
-    from engine.pipeline.run import RunSettings
-    from engine.pipeline.run import run as run_pipeline
+    from engine.pipeline.cluster import cluster_client, scheduler_address
+    from engine.pipeline.clusterstart import ClusterStart
 
-    options = RunSettings(model=args.model, store=args.store, force=args.force, crf=not args.no_crf,
-                         update=not args.no_update, export_points=not args.no_points, tile_size=args.tile_size,
-                         storage_options=args.storage_options)
-    check_run_inputs(args.input, options)  # a missing input is refused before the cluster starts and DIR is made
-    # the output folder next: unwritable, taken by another run or holding the user's files -> one line, no work
-    with claim_output_folder(args.out, force=args.force), run_log(args.out, args.storage_options):
-        logger.debug("run %s --out %s: %s", args.input, args.out, options)
-        with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
-            check_reachable(client, args.input, args.out, args.store)
-            off = {f"buildingparser.outputs.{k}": False
-                   for k, no in (("ifc", args.no_ifc), ("viewer", args.no_viewer), ("copc", args.no_copc)) if no}
+    # the cluster starts in a thread while the run imports the engine, checks the input, claims DIR and loads
+    # the model; the run waits for it before its first distributed work.  A user error on the way leaves
+    # nothing: the cluster is closed (once up) and DIR not made.
+    with ClusterStart(lambda: cluster_client(args.scheduler, n_workers=args.workers,
+                                             memory_limit=args.memory_limit)) as starting:
+        from engine.pipeline.context import check_run_inputs
+        from engine.pipeline.outfolder import claim_output_folder
+        from engine.pipeline.results import summary_lines
+        from engine.pipeline.run import RunSettings
+        from engine.pipeline.run import run as run_pipeline
+
+        options = RunSettings(model=args.model, store=args.store, force=args.force, crf=not args.no_crf,
+                              update=not args.no_update, export_points=not args.no_points,
+                              tile_size=args.tile_size, storage_options=args.storage_options)
+        check_run_inputs(args.input, options)  # a missing input is refused before DIR is made
+        if scheduler_address(args.scheduler):  # an existing cluster: only connecting, which may fail (one line)
+            starting.client()  # ... before DIR is made
+        # the output folder next: unwritable, taken by another run or holding the user's files -> one line, no work
+        with claim_output_folder(args.out, force=args.force), run_log(args.out, args.storage_options):
+            logger.debug("run %s --out %s: %s", args.input, args.out, options)
+            off = {f"buildingparser.outputs.{k}": False for k, no in (("ifc", args.no_ifc),
+                                                                       ("viewer", args.no_viewer),
+                                                                       ("copc", args.no_copc)) if no}
             with dask.config.set(off) if off else contextlib.nullcontext():
-                metrics = run_pipeline(args.input, args.out, client=client, options=options)
+                metrics = run_pipeline(args.input, args.out, client=starting, options=options)
                 lines = summary_lines(metrics, args.out)
     print("\n".join(lines))
     return 0

@@ -31,7 +31,8 @@ import shutil
 from typing import Any
 
 from engine.config import validate_settings
-from engine.pipeline.cluster import performance_report, pin_library_threads
+from engine.pipeline.cluster import check_reachable, performance_report, pin_library_threads
+from engine.pipeline.clusterstart import joined
 from engine.pipeline.context import RunContext, RunSettings, check_run_inputs
 from engine.pipeline.documents import (
     ELEMENTS_DOC,
@@ -85,7 +86,9 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
     out
         The output folder (local path or fsspec URL).
     client
-        A ``distributed.Client``; None runs every stage in this process.
+        A ``distributed.Client``, or a :class:`~engine.pipeline.clusterstart.ClusterStart` whose cluster is
+        still starting (waited for after the inputs, the output folder and the model are checked); None runs
+        every stage in this process.
     options
         See :class:`RunSettings`.
 
@@ -96,13 +99,16 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
     check_run_inputs(input, opt)  # before any folder is made
     out = paths.normalize(out)
     with claim_output_folder(out, force=opt.force):  # one line and nothing touched if it is not ours to write
-        pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
         provenance = Provenance(input, storage_options=opt.storage_options,
                                 is_store=is_store(input, opt.storage_options))
+        model = _checked_model(opt)  # a bad model fails here, before any long work
+        client = joined(client)  # the first distributed work is next: wait for a cluster started with the run
+        check_reachable(client, input, out, opt.store or "")
+        pin_library_threads(client)  # a single-threaded worker uses one core (the LAZ decoder's own pool etc.)
         staging = temporary_folder("run")
         try:
             with performance_report(client, os.path.join(staging, "dask-report.html")):
-                metrics, stats = _compute(input, out, client, opt, staging)
+                metrics, stats = _compute(input, out, client, opt, staging, model)
             metrics["provenance"] = provenance.finish(model_path=opt.model, options=opt, client=client)
             write_metrics_outputs(metrics, stats, staging)
             publish(staging, out, opt.storage_options)
@@ -112,16 +118,13 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def _compute(input: str, out: str, client, opt: RunSettings, staging: str) -> tuple[dict[str, Any], dict[str, Any]]:
+def _compute(input: str, out: str, client, opt: RunSettings, staging: str,
+             model) -> tuple[dict[str, Any], dict[str, Any]]:
     """Every stage up to the metrics, and the outputs but ``metrics.json`` and the report into ``staging``;
     returns the metrics and the space statistics."""
-    from engine.detection.model import load_model
     from engine.outputs.reconcile import reconcile_elements
     from engine.spaces.update import update_summary
 
-    model = load_model(opt.model)  # a bad model path fails here, before any long work
-    if opt.crf:
-        _check_crf_weights(model, opt.model)
     timings: dict[str, float] = {}
     store, fp_ingest = _ingest_stage(input, out, client, opt, timings)
     check_parsable(store, input)  # before any task of the parse: one line for a cloud it cannot represent
@@ -340,6 +343,16 @@ def _source_identity(input: str, storage_options: dict[str, Any] | None) -> list
         info = fs.info(f)
         ident.append([f, info.get("size"), str(info.get("mtime") or info.get("LastModified") or info.get("ETag"))])
     return ident
+
+
+def _checked_model(opt: RunSettings):
+    """The detection model, its CRF weights checked when the run uses the CRF; a one-line UserError otherwise."""
+    from engine.detection.model import load_model
+
+    model = load_model(opt.model)
+    if opt.crf:
+        _check_crf_weights(model, opt.model)
+    return model
 
 
 def _check_crf_weights(model, path: str | None) -> None:

@@ -175,6 +175,7 @@ def test_embedded_cluster_and_run_pin_library_pools(tmp_path, monkeypatch):
         assert next(iter(c.run(_pools).values()))["rayon"] == "1"
     seen = []
     monkeypatch.setattr(pipeline, "pin_library_threads", seen.append)
+    monkeypatch.setattr(pipeline, "check_reachable", lambda *a: None)  # "a client" has no scheduler to ask
     # (the earlier report is withdrawn only once the input is validated: stop at the first work instead)
     (tmp_path / "in.laz").write_bytes(b"")  # the input must exist: it is checked first
     monkeypatch.setattr(pipeline, "temporary_folder", lambda kind: (_ for _ in ()).throw(RuntimeError("stop")))
