@@ -200,3 +200,18 @@ def test_train_refuses_no_colour_with_another_ablation(tmp_path, capsys):
     assert main(["train", "--synthetic", "1", "--model", str(tmp_path / "m"), "--no-colour",
                  "--ablation", "no_local"]) == 2
     assert "--no-colour" in capsys.readouterr().err
+
+
+def test_detect_chooses_the_model_like_run(buildings, no_colour_model, client, tmp_path, monkeypatch, capsys):
+    """``detect`` takes the colour-free model when the setting (or the cloud) says so and names it on stderr."""
+    from engine.cli import main
+
+    _, stores = buildings
+    stem = os.path.join(os.path.dirname(stores["test"].url.rstrip("/")), "nocolour-test")
+    monkeypatch.setattr(modelchoice, "colour_free_model_path", lambda: stem)
+    out = tmp_path / "e.json"
+    with dask.config.set({"buildingparser.detection.colour-free-model": "always"}):
+        assert main(["detect", stores["test"].url, "--out", str(out), "--space-array", "gt_space",
+                     "--scheduler", client.scheduler.address]) == 0
+    assert "model: nocolour-test (detection.colour-free-model is always)" in capsys.readouterr().err
+    assert out.is_file()
