@@ -38,6 +38,9 @@ bench-quick: $(STAMP)
 # 1000-1019: twenty building styles of windows, pilasters and beams); 2 mining rounds, then the box regression and
 # the re-ranking; about 50 min on 2 cores), then CRF weights on buildings 5000-5001 (120 m2) the detectors never saw,
 # its miss cost and the classes it decides chosen leaving one building out (about 3 min)
+# Then the colour-free model (engine/models/nocolour, chosen by run for clouds without colour) from the same
+# buildings and seeds with --no-colour: the colour feature groups are off, so nothing in it reads a point's colour
+# (about 50 min more; docs/model.md)
 MODEL_DATA := build/model-data
 MODEL_SEEDS := 1100 1101 1102 1103 1104 1105
 model: $(STAMP)
@@ -47,6 +50,9 @@ model: $(STAMP)
 	$(BIN)/buildingparser train $(foreach s,$(MODEL_SEEDS),$(MODEL_DATA)/b$(s).zarr) \
 	  --synthetic 20 --seed 1000 --area 80 --rounds 2 --model engine/models/default
 	$(BIN)/buildingparser train-crf engine/models/default --synthetic 2 --seed 5000 --area 120
+	$(BIN)/buildingparser train $(foreach s,$(MODEL_SEEDS),$(MODEL_DATA)/b$(s).zarr) \
+	  --synthetic 20 --seed 1000 --area 80 --rounds 2 --no-colour --model engine/models/nocolour
+	$(BIN)/buildingparser train-crf engine/models/nocolour --synthetic 2 --seed 5000 --area 120
 	rm -rf $(MODEL_DATA)
 
 clean:

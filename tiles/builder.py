@@ -55,6 +55,8 @@ class PartSummary:
     color_max: int | None = None
     #: dimensions whose every value in the part has the same bits (not staged): name -> the bits as an integer
     constants: dict[str, Any] = field(default_factory=dict)
+    #: whether every colour dimension is among ``constants`` (None without colour)
+    color_constant: bool | None = None
 
 
 class StoreBuilder(TileGrid):
@@ -209,6 +211,7 @@ class StoreBuilder(TileGrid):
         if rgb:
             summary.color_max = max(summary.constants[c] if c in summary.constants else int(np.max(values[c]))
                                     for c in rgb)
+            summary.color_constant = all(c in summary.constants for c in rgb)
         return summary
 
     # -- step 2: one task per tile, then the metadata -------------------------------------
@@ -260,6 +263,7 @@ class StoreBuilder(TileGrid):
                          tile_size=self.tile_size, tiles=tiles, parts=parts, sources=sources,
                          dimensions=self.dimensions, crs=crs,
                          color_depth=(None if not cmax else (8 if max(cmax) <= 255 else 16)),
+                         color_constant=constant_colour(summaries),
                          las=las, created=utc_now(), software=software_name(), complete=False)
         root = zarrio.open_group(self.build_url, self.storage_options, mode="r+")
         for name, doc in (docs or {}).items():
@@ -320,6 +324,18 @@ def _build_tile(job: tuple[tuple[int, int], list[tuple[int, int, int, list[int]]
         zarrio.write_array(tile_url, d.name, out.pop(d.name), builder.storage_options)
     zarrio.write_array(tile_url, "part_offsets", offsets, builder.storage_options)
     return n
+
+
+def constant_colour(summaries: list[PartSummary]) -> bool | None:
+    """Whether the parts' points all have one colour (each part's colour constant, the same in all parts);
+    None without colour."""
+    parts = [s for s in summaries if s.color_constant is not None]
+    if not parts:
+        return None
+    if not all(s.color_constant for s in parts):
+        return False
+    names = ("red", "green", "blue")
+    return len({tuple(s.constants.get(c) for c in names) for s in parts}) == 1
 
 
 def _looks_like_store(url: str) -> bool:

@@ -145,6 +145,9 @@ class StoreMeta:
     dimensions: list[Dimension]
     crs: dict[str, Any] | None = None  # {"wkt": ...} when a source had one
     color_depth: int | None = None  # 8 or 16 bits per channel as found in the data; None without colour
+    # True when every point has the same colour (no colour information: run's colour-free model); None without
+    # colour and in stores written before it was recorded
+    color_constant: bool | None = None
     las: dict[str, Any] | None = None  # what export needs to write the source's own LAS flavour
     created: str = ""
     software: str = ""

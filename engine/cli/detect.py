@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 
 NAME = "detect"
 HELP = "detect the elements of every space of a tile store (sliding windows, before the CRF)"
@@ -27,7 +28,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     from engine.cli.options import add_cluster_options, add_storage_options
 
     parser.add_argument("store", metavar="STORE", help="the tile store (path or URL)")
-    parser.add_argument("--model", metavar="MODEL", help="model (MODEL.npz + MODEL.json; default: the shipped one)")
+    parser.add_argument("--model", metavar="MODEL",
+                        help="model (MODEL.npz + MODEL.json; default: the shipped one, the colour-free one for a "
+                             "cloud without colour: ...detection.colour-free-model)")
     parser.add_argument("--out", required=True, metavar="JSON", help="where to write elements.json")
     parser.add_argument("--space-array", default="space_id", choices=["space_id", "gt_space"],
                         help="which spaces to detect in (default: space_id)")
@@ -40,6 +43,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.detection.detect import detect
     from engine.detection.model import load_model
+    from engine.detection.modelchoice import choose_model
     from engine.metrics.detection import evaluate_detections, format_ap_table
     from engine.outputs.labels import label_points, write_elements_json
     from engine.pipeline.cluster import check_reachable, cluster_client
@@ -48,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
     from tiles.store import open_store
 
     store = open_store(args.store, args.storage_options)
-    model = load_model(args.model)
+    choice = choose_model(store.meta, args.model)  # the colour-free model for a cloud without colour
+    model = load_model(choice.path)
+    logging.getLogger(__name__).info("model: %s (%s)", choice.name, choice.reason)
     doc = store.doc(DOC) if args.evaluate else None
     if args.evaluate and not doc:
         raise UserError(store.url, "no ground truth to evaluate against (meta/ground_truth)")

@@ -39,7 +39,8 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="point cloud (.las/.laz, .ply, .pcd, .txt/.xyz/.pts, .e57, an S3DIS Area folder) or a tile store")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--model", metavar="MODEL",
-                   help="detection model (MODEL.npz + MODEL.json); default: the shipped model")
+                   help="detection model (MODEL.npz + MODEL.json); default: the shipped model, or the shipped "
+                        "colour-free one for a cloud without colour (...detection.colour-free-model)")
     p.add_argument("--store", metavar="STORE", help="where to build the tile store (default DIR/store.zarr)")
     p.add_argument("--tile-size", type=float, metavar="M", help="tile edge in metres for a new store")
     p.add_argument("--force", action="store_true", help="redo every stage even when its earlier result is current")

@@ -28,10 +28,14 @@ train.synthetic-buildings) with seeds from --seed on, and trains on them too.
 model trained on the others) and prints the AP of every fold; the final model is
 then trained on all buildings and records the folds' results.  --ablation drops
 a feature group like the paper's Table 3 (no_local, no_global, no_color).
+--no-colour trains the colour-free model (--ablation no_color: the colour and
+context colour groups are off, so nothing in the model reads a point's colour);
+run uses the shipped one, engine/models/nocolour, for clouds without colour.
 
 examples:
   buildingparser train area1.zarr area2.zarr area3.zarr --model models/s3dis --cv
   buildingparser train --synthetic 8 --model engine/models/default
+  buildingparser train --synthetic 8 --no-colour --model engine/models/nocolour
 """
 
 
@@ -50,6 +54,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cv", action="store_true", help="building-wise cross-validation first (prints AP per fold)")
     parser.add_argument("--ablation", choices=["full", "no_local", "no_global", "no_color"], default="full",
                         help="train without a feature group (paper Table 3)")
+    parser.add_argument("--no-colour", action="store_true",
+                        help="the colour-free model: --ablation no_color (nothing in the model reads colour)")
     parser.add_argument("--classes", metavar="NAMES",
                         help="comma-separated element classes to train (default: all 12), e.g. ceiling,floor,wall")
     parser.add_argument("--rounds", type=int, metavar="N",
@@ -62,9 +68,13 @@ def run(args: argparse.Namespace) -> int:
     from engine.metrics.detection import format_ap_table
     from engine.pipeline.cluster import check_reachable, cluster_client
     from engine.training.workflow import prepare_training, train_model
+    from tiles.errors import UserError
 
+    if args.no_colour and args.ablation not in ("full", "no_color"):
+        raise UserError(None, f"--no-colour and --ablation {args.ablation} cannot be combined")
+    ablation = "no_color" if args.no_colour else args.ablation
     plan = prepare_training(args.data, args.model, synthetic=args.synthetic, seed=args.seed, area=args.area,
-                            keep_synthetic=args.keep_synthetic, cv=args.cv, ablation=args.ablation,
+                            keep_synthetic=args.keep_synthetic, cv=args.cv, ablation=ablation,
                             classes=args.classes, rounds=args.rounds, storage_options=args.storage_options)
     with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
         check_reachable(client, *args.data)

@@ -274,7 +274,8 @@ def _provenance_section(metrics: dict[str, Any]) -> str:
     rows = [["package", f"{p.get('package', 'buildingparser')} {p.get('version') or '(not installed)'}"],
             ["git commit", (git.get("commit", "") + (" (uncommitted changes)" if git.get("dirty") else ""))
              if git else "n/a"],
-            ["model", f"{model.get('name', 'n/a')}" + (" (shipped default)" if model.get("default") else "")],
+            ["model", f"{model.get('name', 'n/a')}" + (" (shipped default)" if model.get("default") else "")
+             + (f"; chosen because {model['reason']}" if model.get("reason") else "")],
             *[[f"model sha256: {k}", v] for k, v in (model.get("sha256") or {}).items()],
             ["input", f"{src.get('name', 'n/a')}, {src.get('size', 0):,} bytes"
                       + (f", {src['files']} files" if src.get("files") else "")],

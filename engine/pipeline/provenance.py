@@ -98,6 +98,11 @@ def model_identity(path: str | None) -> dict[str, Any]:
     return {"name": os.path.basename(stem), "default": path is None, "path": stem, "sha256": sha}
 
 
+def without_name(choice: dict[str, Any] | None) -> dict[str, Any]:
+    """A model choice's entries but its name (the model's identity has it): ``colour_free``, ``reason``."""
+    return {k: v for k, v in (choice or {}).items() if k != "name"}
+
+
 def run_choices(options: Any) -> dict[str, Any]:
     """The run's own choices (:class:`engine.pipeline.context.RunSettings`) that differ from their defaults,
     storage options left out."""
@@ -137,8 +142,10 @@ class Provenance:
         self._input: Future = self._pool.submit(input_identity, input, storage_options, is_store=is_store)
         self._pool.shutdown(wait=False)
 
-    def finish(self, *, model_path: str | None, options: Any, client: Any) -> dict[str, Any]:
-        """The ``provenance`` dict of ``metrics.json``."""
+    def finish(self, *, model_path: str | None, options: Any, client: Any,
+               model_choice: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The ``provenance`` dict of ``metrics.json``; ``model_choice`` (why this model, whether it is the
+        colour-free one: :meth:`engine.detection.modelchoice.ModelChoice.to_json`) joins its ``model``."""
         from tiles.config import non_default_settings
 
         try:
@@ -147,6 +154,6 @@ class Provenance:
             logger.warning("input checksum not taken: %s", e)
             source = None
         return {"package": "buildingparser", "version": package_version(), "git": git_commit(),
-                "model": model_identity(model_path),
+                "model": {**model_identity(model_path), **without_name(model_choice)},
                 "settings": {"buildingparser": non_default_settings(), "run": run_choices(options)},
                 "input": source, "started": self.started, "ended": now(), "cluster": cluster_identity(client)}

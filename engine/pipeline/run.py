@@ -24,6 +24,7 @@ how stages, records and the staging folder work: docs/design/pipeline.md.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import logging
 import os
@@ -31,6 +32,7 @@ import shutil
 from typing import Any
 
 from engine.config import validate_settings
+from engine.detection.modelchoice import ModelChoice, choose_model
 from engine.pipeline.cluster import check_reachable, performance_report, pin_library_threads
 from engine.pipeline.clusterstart import joined
 from engine.pipeline.context import RunContext, RunSettings, check_run_inputs
@@ -108,8 +110,9 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
         staging = temporary_folder("run")
         try:
             with performance_report(client, os.path.join(staging, "dask-report.html")):
-                metrics, stats = _compute(input, out, client, opt, staging, model)
-            metrics["provenance"] = provenance.finish(model_path=opt.model, options=opt, client=client)
+                metrics, stats, choice = _compute(input, out, client, opt, staging, model)
+            metrics["provenance"] = provenance.finish(model_path=choice.path, options=opt, client=client,
+                                                      model_choice=choice.to_json())
             write_metrics_outputs(metrics, stats, staging)
             publish(staging, out, opt.storage_options)
             record_written(out, os.listdir(staging))
@@ -119,17 +122,24 @@ def run(input: str, out: str, *, client=None, options: RunSettings | None = None
 
 
 def _compute(input: str, out: str, client, opt: RunSettings, staging: str,
-             model) -> tuple[dict[str, Any], dict[str, Any]]:
+             model) -> tuple[dict[str, Any], dict[str, Any], ModelChoice]:
     """Every stage up to the metrics, and the outputs but ``metrics.json`` and the report into ``staging``;
-    returns the metrics and the space statistics."""
+    returns the metrics, the space statistics and the model used (``model``, or the colour-free one)."""
+    from engine.detection.model import load_model
     from engine.outputs.reconcile import reconcile_elements
     from engine.spaces.update import update_summary
 
     timings: dict[str, float] = {}
     store, fp_ingest = _ingest_stage(input, out, client, opt, timings)
     check_parsable(store, input)  # before any task of the parse: one line for a cloud it cannot represent
+    choice = choose_model(store.meta, opt.model)  # the colour-free model for a cloud without colour
+    logger.info("model: %s (%s)", choice.name, choice.reason)
+    if choice.path != opt.model:
+        model = load_model(choice.path)
+        if opt.crf:
+            _check_crf_weights(model, choice.path)
     withdraw_report(out, opt.storage_options)  # the input is valid: from here the folder is incomplete until published
-    ctx = RunContext(input, out, opt, client, staging, store, timings)
+    ctx = RunContext(input, out, dataclasses.replace(opt, model=choice.path), client, staging, store, timings)
     has_truth = "gt_space" in store.meta.names()
     parsed, fp_spaces = _spaces_stage(ctx, fp_ingest)
     proposals, fp_det = _detection_stage(ctx, model, parsed, fp_spaces)
@@ -166,7 +176,7 @@ def _compute(input: str, out: str, client, opt: RunSettings, staging: str,
         export_job.result()  # an export failure (recorded in the store) is the run's
     metrics["timings"], metrics["skipped"] = all_timings(ctx.log, ctx.timings)
     metrics["points_written"] = bool(ctx.options.export_points)
-    return json_safe(metrics), stats
+    return json_safe(metrics), stats, choice
 
 
 # -- the stages -------------------------------------------------------------------------------------

@@ -335,3 +335,25 @@ def test_run_with_crf_weights_keeps_a_subset_and_scores_the_ranking(building, cl
     assert not (out / "points.laz").exists()
     text = "\n".join(results.summary_lines(metrics, str(out)))
     assert "contextual score" in text and "points.laz" not in text
+
+
+def test_a_cloud_without_colour_runs_the_colour_free_model_and_says_so(building, client, tmp_path, monkeypatch):
+    """No --model and no colour: the colour-free model (a stand-in here), one log line, metrics.json and the report
+    name it and why; the run's own choices do not claim a --model."""
+    from engine.detection import modelchoice
+
+    _, laz, model = building
+    grey = tmp_path / "grey.laz"
+    laspy.convert(laspy.read(str(laz)), point_format_id=6).write(str(grey))
+    monkeypatch.setattr(modelchoice, "colour_free_model_path", lambda: model)
+    out = tmp_path / "out"
+    with logged("engine.pipeline.run") as lines:
+        metrics = run(str(grey), str(out), client=client, options=RunSettings())
+    assert f"model: {os.path.basename(model)} (the cloud has no colour)" in lines
+    chosen = json.loads((out / "metrics.json").read_text())["provenance"]["model"]
+    assert chosen == metrics["provenance"]["model"]
+    assert chosen["name"] == os.path.basename(model) and chosen["path"] == model and not chosen["default"]
+    assert chosen["colour_free"] is True and chosen["reason"] == "the cloud has no colour"
+    assert set(chosen["sha256"]) == {"model.json", "model.npz"}
+    assert "model" not in metrics["provenance"]["settings"]["run"]
+    assert "chosen because the cloud has no colour" in (out / "report.html").read_text()
