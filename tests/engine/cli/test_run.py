@@ -81,5 +81,6 @@ def test_off_a_terminal_a_run_shows_one_line_per_stage(tmp_path, client, capsys)
     assert main(["run", str(laz), "--out", str(tmp_path / "out"), "--scheduler", client.scheduler.address]) == 0
     err = capsys.readouterr().err.splitlines()  # captured: not a terminal, so no bars
     stages = [ln for ln in err if ln.split(": ")[1].split(" ")[0].rstrip(":") in
-              {"ingest", "spaces", "detection", "crf", "space", "labels", "points.laz", "dask"}]
-    assert len(err) <= len(STAGES) + 2 and len(stages) == len(err), err  # no per-batch lines
+              {"ingest", "spaces", "detection", "crf", "space", "labels", "points.laz", "points.copc.laz", "dask",
+               "model"}]
+    assert len(err) <= len(STAGES) + 3 and len(stages) == len(err), err  # no per-batch lines
