@@ -1,5 +1,5 @@
-cd /work/wt-23
-PY=/work/main/.venv/bin/python
+cd "$(dirname "$0")/../.."  # the checkout
+PY=.venv/bin/python
 for seed in 61 62 63 64; do
   $PY -m engine.cli synth /tmp/i23/r$seed-all.laz --seed $seed --rooms 4 --density 1500 --overwrite --workers 1 > /dev/null 2>&1
   $PY - $seed <<'PYEOF'

@@ -60,6 +60,11 @@ class DividerSettings:
     #: the two sides (they broke the strict run above).
     empty_fraction: float = 0.1
     empty_smooth: float = 0.1
+    #: A void counts only where the upper band holds enough points beside it, never over all heights, and
+    #: empty runs divide nothing: set for a storey whose floor was not scanned (:func:`engine.spaces.slicing.
+    #: floor_scanned`), where furniture alone fills the histograms and the gaps between pieces look like
+    #: walls' voids.  Not a user setting: decided per storey from its points.
+    band_only: bool = False
 
     def bank(self) -> np.ndarray:
         """The filter bank as ``(k, 2)`` integer ``(δ, c)`` in bins, δ ≥ 1, c ≥ 1, no duplicates."""
@@ -256,7 +261,7 @@ def _evaluate(i, d, c, k, n: int, cs, med, ucs, umed, half: int, p: DividerSetti
     ql = np.clip(i - c - half, 0, n - 1)
     qr = np.minimum(i + d + c + half, n - 1)
     lm, rm, gm, level = _margins(cs, med, i0, i, i2, i3, d, c, ql, qr)
-    limit = np.full(np.broadcast(fit, lm).shape, p.max_void_ratio_full)
+    limit = np.full(np.broadcast(fit, lm).shape, -np.inf if p.band_only else p.max_void_ratio_full)
     if ucs is not None:
         # above the doors, where the band holds enough points beside the gap: test the band
         ulm, urm, ugm, ulevel = _margins(ucs, umed, i0, i, i2, i3, d, c, ql, qr)
@@ -315,6 +320,8 @@ def detect_dividers(hist: np.ndarray, params: DividerSettings | None = None, *, 
     if n < 3:
         return []
     up = None if upper is None else np.asarray(upper, dtype=np.float64)
+    if up is None and p.band_only:
+        return []
     bank = p.bank()
     wb = p.bins(p.room_window)
     half = wb // 2

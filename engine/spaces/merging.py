@@ -7,6 +7,7 @@ leaky face does not chain two rooms), and weak groups absorbed.  Why and how, wi
 """
 from __future__ import annotations
 
+import dataclasses
 from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
@@ -95,8 +96,9 @@ def face_divider(hist: np.ndarray, support: tuple[int, int], position: int, wind
     bw = params.bin_width
     face = position * bw
     rel = window - s0  # index of the face in h
-    runs = empty_runs(h, params.bins(params.empty_run))
-    if not any(r0 <= rel <= r1 for r0, r1 in runs):
+    # without a scanned floor, emptiness is no evidence (a room's middle is as empty as the way between rooms)
+    runs = [] if params.band_only else empty_runs(h, params.bins(params.empty_run))
+    if runs and not any(r0 <= rel <= r1 for r0, r1 in runs):
         # stray points in an unscanned stretch: the reference is the room level of the better scanned
         # side (the median over that side of the support)
         sides = [x for x in (h[:max(rel, 0)], h[max(rel, 0):]) if len(x)]
@@ -111,20 +113,37 @@ def face_divider(hist: np.ndarray, support: tuple[int, int], position: int, wind
     for d in detect_dividers(h, params, start=first * bw, upper=up):
         if abs(d.position - face) <= d.width / 2 + d.margin and (best is None or d.score > best.score):
             best = d
-    if best is None:
+    if best is None or (params.band_only and up is not None and not _solid_below(h - up, best, first * bw, params)):
         return None
     return {"kind": "peak-gap-peak", **best.to_json()}
 
 
-def _test(item: tuple[np.ndarray, np.ndarray, tuple[int, int], int, int], params: DividerSettings
+def _solid_below(lower: np.ndarray, d, start: float, params: DividerSettings) -> bool:
+    """Whether a wall's void found in the upper band is one below it too (a wall stands on the floor).
+
+    Without a scanned floor or ceiling, the gaps between beams or lamps are voids in the upper band as the
+    gaps between furniture are below it; a wall's faces and void run through both.
+    """
+    low = dataclasses.replace(params, band_only=False)
+    return any(abs(x.position - d.position) <= (x.width + d.width) / 2 + max(x.margin, d.margin)
+               for x in detect_dividers(lower, low, start=start))
+
+
+def _test(item: tuple[np.ndarray, np.ndarray, tuple[int, int], int, int, bool], params: DividerSettings
           ) -> dict[str, Any] | None:
-    hist, upper, support, position, window = item
+    hist, upper, support, position, window, band_only = item
+    if band_only:
+        params = dataclasses.replace(params, band_only=True)
     return face_divider(hist, support, position, window, params, upper)
 
 
 def test_edges(store, grid: Grid, floors: np.ndarray, cells: list[Box], edges: list[Edge], params: DividerSettings,
-               window_m: float, band_z: np.ndarray, *, client=None) -> None:
-    """Fill ``edge.divider`` for every edge: one histogram pass over the tiles, one task per edge."""
+               window_m: float, band_z: np.ndarray, *, client=None, band_only: np.ndarray | None = None) -> None:
+    """Fill ``edge.divider`` for every edge: one histogram pass over the tiles, one task per edge.
+
+    ``band_only``: per storey, whether its faces are tested in the upper band alone (its floor was not scanned:
+    :func:`engine.spaces.slicing.floor_scanned`).
+    """
     if not edges:
         return
     window = params.bins(window_m)
@@ -139,7 +158,8 @@ def test_edges(store, grid: Grid, floors: np.ndarray, cells: list[Box], edges: l
         lo_a = cells[e.a].range(e.axis)[0]
         hi_b = cells[e.b].range(e.axis)[1]
         support = (max(0, lo_a - (e.position - window)), min(2 * window, hi_b - (e.position - window)))
-        items.append((hists[2 * k] + hists[2 * k + 1], hists[2 * k + 1], support, e.position, window))
+        only = bool(band_only[e.floor]) if band_only is not None else False
+        items.append((hists[2 * k] + hists[2 * k + 1], hists[2 * k + 1], support, e.position, window, only))
     results = run_tasks(_test, items, client=client, label="merging: face tests",
                         keys=list(range(len(edges))), extra_args=(params,))
     for e, r in zip(edges, results):
@@ -157,7 +177,6 @@ def ridge_faces(edges: list[Edge], ridges: list, params, bin_width: float, occup
     both sides (``occupancy``, :class:`engine.spaces.ridges.Occupancy`) and is left out
     of the face elsewhere.
     """
-    import dataclasses
 
     from engine.spaces.ridges import face_pieces
 
@@ -205,8 +224,8 @@ class Components:
     refused: list[tuple[int, int]] = field(default_factory=list)
 
 
-def agglomerate(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRules | None = None
-                ) -> tuple[np.ndarray, list[tuple[int, int]]]:
+def agglomerate(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRules | None = None,
+                band_only: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[int, int]]]:
     """Groups of cells joined through faces without a divider, most open pair first (a graph partition).
 
     Every cell starts as its own group.  For each pair of groups with faces
@@ -227,7 +246,9 @@ def agglomerate(cells: list[Box], edges: list[Edge], bin_width: float, rules: Me
     an unscanned room, the empty surroundings with a few flying points) is no
     evidence of an opening, only of not having looked: it does not count.
     Nearly unscanned cells still join each other, and weak groups are absorbed
-    afterwards by :func:`merge` into ONE neighbour.
+    afterwards by :func:`merge` into ONE neighbour.  In a storey without a
+    scanned floor (``band_only``, per storey) a thin cell is only a stretch
+    of bare floor: there every cell counts as scanned.
 
     Parameters
     ----------
@@ -263,6 +284,8 @@ def agglomerate(cells: list[Box], edges: list[Edge], bin_width: float, rules: Me
     scanned = count > 0
     level = float(np.median(density[scanned])) if scanned.any() else 0.0
     sparse = density < r.min_scanned_density * level
+    if band_only is not None:
+        sparse &= ~np.asarray(band_only, dtype=bool)[np.array([c.floor for c in cells], dtype=np.int64)]
     free = np.array([e.divider is None for e in edges], dtype=bool) & (sparse[ea] == sparse[eb])
     while True:
         ga, gb = g[ea], g[eb]
@@ -285,8 +308,12 @@ def agglomerate(cells: list[Box], edges: list[Edge], bin_width: float, rules: Me
         g[g == pb[j]] = pa[j]
 
 
-def merge(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRules | None = None) -> Components:
-    """Agglomeration of the cells through faces without a divider, then absorption of weak groups (smallest first)."""
+def merge(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRules | None = None,
+          band_only: np.ndarray | None = None) -> Components:
+    """Agglomeration of the cells through faces without a divider, then absorption of weak groups (smallest first).
+
+    ``band_only``: per storey, whether its floor was not scanned (see :func:`agglomerate`).
+    """
     r = rules or MergeRules()
     n = len(cells)
     if n == 0:
@@ -295,7 +322,7 @@ def merge(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRul
     eb = np.array([e.b for e in edges], dtype=np.int64)
     elen = np.array([e.length_bins for e in edges], dtype=np.float64)
     ediv = np.array([e.divider is not None for e in edges], dtype=bool)
-    groups, refused = agglomerate(cells, edges, bin_width, r)
+    groups, refused = agglomerate(cells, edges, bin_width, r, band_only)
     ids, labels = np.unique(groups, return_inverse=True)
     labels = labels.ravel().astype(np.int64)
     k_comps = len(ids)

@@ -169,8 +169,13 @@ def refine_spaces(items: list[dict[str, Any]], store, index: BoxIndex, grid: Gri
 
 
 def refine_large_spaces(store, grid: Grid, p: SpaceSettings, floors: np.ndarray, band_z: np.ndarray,
-                        cells: list[Box], labels: np.ndarray, index: BoxIndex, client) -> list[Refinement]:
-    """Every space of at least ``refine_min_area`` m² parsed again in its own frame (one task each)."""
+                        cells: list[Box], labels: np.ndarray, index: BoxIndex, client,
+                        skip: np.ndarray | None = None) -> list[Refinement]:
+    """Every space of at least ``refine_min_area`` m² parsed again in its own frame (one task each).
+
+    ``skip``: per storey, True where its spaces are not refined (no scanned floor: the refinement's ridges and
+    ceiling steps read a ceiling and walls standing on a floor).
+    """
     if p.refine_min_area <= 0 or not len(cells) or labels.max() < 0:
         return []
     bw = p.bin_width
@@ -182,6 +187,8 @@ def refine_large_spaces(store, grid: Grid, p: SpaceSettings, floors: np.ndarray,
     items = []
     for sp in np.flatnonzero(space_area >= p.refine_min_area).tolist():
         members = np.flatnonzero(labels == sp)
+        if skip is not None and skip[cells[members[0]].floor]:
+            continue
         touch = tiles_touching(extents, floors, np.array([cells[i].row() for i in members]))
         items.append({"space": int(sp), "floor": int(cells[members[0]].floor), "cells": members,
                       "tiles": [names[i] for i in np.flatnonzero(touch)]})

@@ -151,6 +151,30 @@ def floor_levels(z_hist: np.ndarray, z_lo: int, floors: list[tuple[int, int]], z
     return out
 
 
+def floor_scanned(z_hist: np.ndarray, z_lo: int, floors: list[tuple[int, int]], ground: list[int], z_bin: float,
+                  margin: float = 0.1, max_below: float = 0.05, bottom_share: float = 0.01
+                  ) -> tuple[list[int], list[bool]]:
+    """Whether each storey's floor was scanned, and its floor bin (the storey's bottom where it was not).
+
+    A scanned floor is the lowest surface of its storey: at most ``max_below`` of
+    the storey's points lie more than ``margin`` metres below it (noise, a few
+    cm of registration error).  Where more do, the densest low bin
+    (:func:`floor_levels`) is a furniture top (the floor was cropped away, as
+    users often do before a segmentation, or never scanned), and the floor is
+    taken at the bin below which ``bottom_share`` of the storey's points lie.
+    """
+    levels, scanned = [], []
+    m = max(1, int(round(margin / z_bin)))
+    for (a, b), g in zip(floors, ground):
+        h = z_hist[a - z_lo:b - z_lo]
+        total = float(h.sum())
+        below = float(h[:max(0, g - m - a)].sum())
+        ok = total <= 0 or below <= max_below * total
+        scanned.append(bool(ok))
+        levels.append(int(g) if ok else a + int(np.searchsorted(np.cumsum(h), bottom_share * total)))
+    return levels, scanned
+
+
 def find_storeys(z_hist: np.ndarray, z_lo: int, params: DividerSettings, min_height: float = 2.0
                  ) -> tuple[list[tuple[int, int]], list[FoundDivider]]:
     """Storeys as z-bin ranges from the building's z histogram, and the slab dividers between them.

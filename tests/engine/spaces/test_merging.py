@@ -159,3 +159,33 @@ def test_face_divider_empty_run_tolerates_stray_points():
     # a real floor (room level everywhere) is not nearly empty
     h2, up2 = _face_hist(False)
     assert face_divider(h2, (0, 200), 1000, 100, DividerSettings(bin_width=BW), up2) is None
+
+
+def test_without_a_scanned_floor_only_a_void_in_the_upper_band_and_below_it_divides():
+    import dataclasses
+
+    p = DividerSettings()
+    window = 160
+    n = 2 * window
+    gap = slice(window - 10, window + 10)  # a 20 cm void at the face
+    faces = [slice(window - 14, window - 10), slice(window + 10, window + 14)]
+
+    def hist(level: float, face: float, void: bool) -> np.ndarray:
+        h = np.full(n, level)
+        for f in faces:
+            h[f] += face
+        if void:
+            h[gap] = 0.0
+        return h
+
+    furniture = hist(5.0, 60.0, True)  # two pieces of furniture, nothing in the upper band
+    empty_band = np.zeros(n)
+    beams = hist(2.0, 30.0, True)  # a gap between beams in the upper band, furniture-free below
+    wall_band = hist(2.0, 30.0, True)
+    only = dataclasses.replace(p, band_only=True)
+    assert face_divider(furniture + empty_band, (0, n), window, window, p, empty_band) is not None
+    assert face_divider(furniture + empty_band, (0, n), window, window, only, empty_band) is None
+    below = np.full(n, 5.0)  # nothing divides below the beams
+    assert face_divider(below + beams, (0, n), window, window, only, beams) is None
+    wall_below = hist(5.0, 60.0, True)  # a wall: its faces and void run from the floor to the ceiling
+    assert face_divider(wall_below + wall_band, (0, n), window, window, only, wall_band) is not None

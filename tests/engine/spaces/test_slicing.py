@@ -93,3 +93,22 @@ def test_split_positions_follow_the_histogram_origin(lo):
     assert len(sp.dividers) == 1
     assert sp.dividers[0]["position"] == pytest.approx((lo + 205) * BW, abs=BW)
     assert [p[:2] for p in sp.pieces] == [(lo, lo + sp.dividers[0]["cut"] - lo), (sp.dividers[0]["cut"], lo + 400)]
+
+
+def test_a_storey_whose_densest_low_surface_has_a_fifth_of_its_points_below_has_no_scanned_floor():
+    from engine.spaces.slicing import floor_levels, floor_scanned
+
+    z_bin = 0.02
+    walls = np.full(150, 10.0)  # 0 ... 3 m of wall points
+    with_floor = walls.copy()
+    with_floor[0] += 2000.0  # the floor, the lowest surface
+    with_floor[37] += 800.0  # table tops at 0.74 m
+    cropped = walls.copy()
+    cropped[37] += 800.0  # the floor was cropped away: the densest low bin is the tables
+    hist = np.concatenate([with_floor, np.zeros(60), cropped])
+    floors = [(0, 150), (210, 360)]
+    ground = floor_levels(hist, 0, floors, z_bin)
+    assert ground == [0, 247]
+    levels, scanned = floor_scanned(hist, 0, floors, ground, z_bin)
+    assert scanned == [True, False]
+    assert levels[0] == 0 and 210 <= levels[1] <= 212  # the storey's bottom
