@@ -98,7 +98,7 @@ def face_divider(hist: np.ndarray, support: tuple[int, int], position: int, wind
     rel = window - s0  # index of the face in h
     # without a scanned floor, emptiness is no evidence (a room's middle is as empty as the way between rooms)
     runs = [] if params.band_only else empty_runs(h, params.bins(params.empty_run))
-    if runs and not any(r0 <= rel <= r1 for r0, r1 in runs):
+    if not params.band_only and not any(r0 <= rel <= r1 for r0, r1 in runs):
         # stray points in an unscanned stretch: the reference is the room level of the better scanned
         # side (the median over that side of the support)
         sides = [x for x in (h[:max(rel, 0)], h[max(rel, 0):]) if len(x)]
@@ -277,15 +277,8 @@ def agglomerate(cells: list[Box], edges: list[Edge], bin_width: float, rules: Me
     eb = np.array([e.b for e in edges], dtype=np.int64)
     length = np.array([e.length_bins for e in edges], dtype=np.float64) * bin_width
     box = np.array([[c.u0, c.u1, c.v0, c.v1] for c in cells], dtype=np.float64) * bin_width
-    area = (box[:, 1] - box[:, 0]) * (box[:, 3] - box[:, 2])
     perimeter = 2.0 * ((box[:, 1] - box[:, 0]) + (box[:, 3] - box[:, 2]))
-    count = np.array([c.count for c in cells], dtype=np.float64)
-    density = count / np.maximum(area, 1e-12)
-    scanned = count > 0
-    level = float(np.median(density[scanned])) if scanned.any() else 0.0
-    sparse = density < r.min_scanned_density * level
-    if band_only is not None:
-        sparse &= ~np.asarray(band_only, dtype=bool)[np.array([c.floor for c in cells], dtype=np.int64)]
+    sparse = _nearly_unscanned(cells, box, r.min_scanned_density, band_only)
     free = np.array([e.divider is None for e in edges], dtype=bool) & (sparse[ea] == sparse[eb])
     while True:
         ga, gb = g[ea], g[eb]
@@ -306,6 +299,21 @@ def agglomerate(cells: list[Box], edges: list[Edge], bin_width: float, rules: Me
         cand = np.flatnonzero(ok)
         j = cand[np.lexsort((keys[cand], -ratio[cand]))[0]]
         g[g == pb[j]] = pa[j]
+
+
+def _nearly_unscanned(cells: list[Box], box: np.ndarray, min_density: float,
+                      band_only: np.ndarray | None) -> np.ndarray:
+    """Cells with fewer points per m² than ``min_density`` times the median scanned cell (never in a
+    storey without a scanned floor, where a thin cell is bare floor)."""
+    area = (box[:, 1] - box[:, 0]) * (box[:, 3] - box[:, 2])
+    count = np.array([c.count for c in cells], dtype=np.float64)
+    density = count / np.maximum(area, 1e-12)
+    scanned = count > 0
+    level = float(np.median(density[scanned])) if scanned.any() else 0.0
+    sparse = density < min_density * level
+    if band_only is not None:
+        sparse &= ~np.asarray(band_only, dtype=bool)[np.array([c.floor for c in cells], dtype=np.int64)]
+    return sparse
 
 
 def merge(cells: list[Box], edges: list[Edge], bin_width: float, rules: MergeRules | None = None,
