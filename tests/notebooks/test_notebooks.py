@@ -1,4 +1,4 @@
-"""Both notebooks execute top to bottom on tiny data (nbclient), and are stored with their small outputs."""
+"""Both notebooks execute top to bottom on tiny data (nbclient), and are stored without outputs."""
 from __future__ import annotations
 
 import json
@@ -28,24 +28,15 @@ def _execute(name: str, env: dict[str, str], cwd: pathlib.Path) -> nbformat.Note
     return nb
 
 
-#: A stored notebook (with its outputs, so that GitHub shows the figures) stays small.
-MAX_STORED_BYTES = 1_500_000
-
-
-@pytest.mark.parametrize("name,figures", [("scaling.ipynb", 3), ("results.ipynb", 2)])
-def test_notebooks_are_stored_with_their_small_outputs(name, figures):
-    path = NOTEBOOKS / name
-    nb = nbformat.read(path, as_version=4)
+@pytest.mark.parametrize("name", ["scaling.ipynb", "results.ipynb"])
+def test_notebooks_are_stored_without_outputs(name):
+    # outputs of one machine's run go stale with every change and bloat the history; the notebooks are
+    # executed by the test below instead
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
     code = [c for c in nb.cells if c.cell_type == "code"]
-    assert all(c.execution_count is not None for c in code), f"{name}: run it top to bottom before committing"
-    counts = [c.execution_count for c in code]
-    assert counts == sorted(counts), f"{name}: cells were run out of order"
-    assert _figures(nb) >= figures
-    assert not any(o.get("output_type") == "error" for c in code for o in c.outputs)
-    assert path.stat().st_size <= MAX_STORED_BYTES
-    text = path.read_text()
-    for private in ("/tmp/", "/work/", "/home/", "/root/"):
-        assert private not in text, f"{name}: an output shows a path of the machine it ran on ({private})"
+    assert code, f"{name}: no code cells"
+    assert not any(c.outputs for c in code), f"{name}: clear its outputs before committing"
+    assert all(c.execution_count is None for c in code), f"{name}: clear its execution counts before committing"
 
 
 def _figures(nb) -> int:
