@@ -155,7 +155,7 @@ def _slice(store: TileStore, grid: Grid, z_hist: np.ndarray, z_lo: int, p: Space
     band_z = np.array([g + int(round(p.upper_band / p.z_bin)) for g in ground], dtype=np.int64)
     start = _initial_boxes(store, grid, floors)
     cells, walls, passes = slice_storeys(store, grid, floors, start, p.slicing_walls, band_z, client=client,
-                                         max_levels=p.max_levels)
+                                         max_levels=p.max_levels, floor_scanned=np.array(scanned, dtype=bool))
     floors_arr = np.array(floors, dtype=np.int64).reshape(-1, 2)
     return _Slicing(floors, floors_arr, slabs, band_z, cells, walls, passes, np.array(scanned, dtype=bool))
 

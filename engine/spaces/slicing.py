@@ -93,16 +93,19 @@ class Split:
 
 
 def split_histogram(hist: np.ndarray, lo: int, params: DividerSettings, upper: np.ndarray | None = None,
-                    ridges: list[int] | tuple[int, ...] = ()) -> Split:
+                    ridges: list[int] | tuple[int, ...] = (), inner_empties: bool = True) -> Split:
     """Cut a histogram (first bin ``lo``) at its dividers and empty runs into occupied pieces.
 
     ``upper`` is the histogram of the upper band (see :func:`engine.spaces.dividers.detect_dividers`).
     ``ridges`` are global bins of ridge lines that cut the box too (:mod:`engine.spaces.ridges`); one
-    within ``min_spacing`` of a peak-gap-peak divider gives way to it.
+    within ``min_spacing`` of a peak-gap-peak divider gives way to it.  Without ``inner_empties`` only the
+    empty runs at the two ends trim the box (a storey whose floor was not scanned: a room's middle is empty).
     """
     h = np.asarray(hist)
     n = len(h)
     runs = empty_runs(h, params.bins(params.empty_run))
+    if not inner_empties:
+        runs = [(r0, r1) for r0, r1 in runs if r0 == 0 or r1 == n]
     divs = detect_dividers(h, params, start=lo * params.bin_width, upper=upper)
     sp = params.bins(params.min_spacing)
     kinds = ["peak-gap-peak"] * len(divs)
@@ -137,8 +140,8 @@ def split_histogram(hist: np.ndarray, lo: int, params: DividerSettings, upper: n
 
 
 def _search(item: tuple, params: DividerSettings) -> Split:
-    hist, upper, lo, ridges = item
-    return split_histogram(hist, lo, params, upper, ridges)
+    hist, upper, lo, ridges, inner_empties = item
+    return split_histogram(hist, lo, params, upper, ridges, inner_empties)
 
 
 def floor_levels(z_hist: np.ndarray, z_lo: int, floors: list[tuple[int, int]], z_bin: float,
@@ -232,7 +235,8 @@ def _stretches(hist: np.ndarray, lo: int, params: DividerSettings) -> list[tuple
 
 def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[Box], params: DividerSettings,
                   band_z: np.ndarray, *, client=None, max_levels: int = 8, ridges: list | None = None,
-                  ridge_params=None) -> tuple[list[Box], list[FoundDivider], list[dict[str, Any]]]:
+                  ridge_params=None, floor_scanned: np.ndarray | None = None
+                  ) -> tuple[list[Box], list[FoundDivider], list[dict[str, Any]]]:
     """Recursive slicing of the storeys' boxes; returns the final cells, the dividers and per-pass stats.
 
     Each box has its next axis.  A box cut along an axis gives children that
@@ -242,7 +246,8 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
     second is searched at once (one pass less).  ``band_z`` is the first z bin
     of each storey's upper band (points above door height).  ``ridges``
     (:class:`engine.spaces.ridges.RidgeLine`, with ``ridge_params``) also cut every box
-    they run through far enough (:func:`engine.spaces.ridges.box_cuts`).
+    they run through far enough (:func:`engine.spaces.ridges.box_cuts`).  In a storey whose floor was not
+    scanned (``floor_scanned`` False) an empty run inside a box divides nothing (a room's middle is empty).
     """
     from engine.spaces.ridges import box_cuts
     boxes = list(start)
@@ -263,7 +268,7 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
         hists, lo = _level_histograms(store, grid, floors, boxes, active_ids, both, list(tiles), band_z, client,
                                       level)
 
-        def item(i: int, which: int) -> tuple[np.ndarray, np.ndarray, int, list[int]]:
+        def item(i: int, which: int) -> tuple[np.ndarray, np.ndarray, int, list[int], bool]:
             k = 4 * i + 2 * which
             cuts: list[int] = []
             if ridges:
@@ -271,7 +276,8 @@ def slice_storeys(store, grid: Grid, floors: list[tuple[int, int]], start: list[
                 ax = b.next_axis if which == 0 else 1 - b.next_axis
                 a0, a1 = b.range(ax)
                 cuts = [r.cut for r in box_cuts(ridges, ax, a0, a1, b.range(1 - ax), ridge_params, bw)]
-            return hists[k] + hists[k + 1], hists[k + 1], int(lo[i, which]), cuts
+            inner = True if floor_scanned is None else bool(floor_scanned[boxes[i].floor])
+            return hists[k] + hists[k + 1], hists[k + 1], int(lo[i, which]), cuts, inner
 
         firsts = run_tasks(_search, [item(i, 0) for i in active_ids], client=client,
                            label=f"dividers pass {level}", keys=active_ids, extra_args=(params,))

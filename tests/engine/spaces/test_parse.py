@@ -172,3 +172,40 @@ def test_the_generated_building_turned_by_30_degrees_gives_the_same_number_of_sp
     assert len(a.spaces) == len(b.spaces)
     assert abs((math.degrees(b.frame.yaw) - math.degrees(a.frame.yaw) - 30.0 + 45) % 90 - 45) < 0.1
     assert distributed_ari(generated[30.0], client=client) >= 0.9
+
+
+@pytest.fixture(scope="module")
+def four_rooms(tmp_path_factory, client):
+    """A small generated building of four rooms (engine.synth), with its per-point classes."""
+    from engine.synth import generate
+    from tiles.store import open_store
+
+    path = tmp_path_factory.mktemp("rooms") / "r.zarr"
+    generate(str(path), seed=63, rooms=4, density=500, client=client)
+    return open_store(str(path))
+
+
+def _room_cut_out(store, *, crop: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The points of the largest room of a generated store; without its floor and ceiling when ``crop``."""
+    # world coordinates in metres (``store.read`` gives the raw integers: as metres they spread 99 k points over
+    # 80 km and so over as many 10 m tiles, which is what made this test look hung)
+    xyz = np.concatenate([store.xyz(t, local=False) for t in store.tiles])
+    cols = [store.read(t, ["gt_space", "gt_class"]) for t in store.tiles]
+    space = np.concatenate([c["gt_space"] for c in cols])
+    cls = np.concatenate([c["gt_class"] for c in cols])
+    ids, n = np.unique(space[space > 0], return_counts=True)
+    keep = space == ids[np.argmax(n)]
+    if crop:
+        keep &= ~np.isin(cls, [0, 1])  # S3DIS codes: 0 ceiling, 1 floor
+    return xyz[keep], np.zeros(int(keep.sum()), dtype=np.int32)
+
+
+@pytest.mark.parametrize("crop", [False, True])
+def test_one_room_parses_into_one_space_with_or_without_its_floor_and_ceiling(tmp_path, four_rooms, client, crop):
+    # users often crop floors and ceilings away before a segmentation; without them the gaps between pieces of
+    # furniture (and between beams and lamps above) looked like walls' voids: this room became 10 spaces
+    xyz, gt = _room_cut_out(four_rooms, crop=crop)
+    store = write_store(tmp_path / "room.zarr", xyz, gt, client=client)
+    parse = parse_spaces(store, client=client)
+    assert parse.stats["storeys_without_floor"] == ([0] if crop else [])
+    assert len(parse.spaces) == 1

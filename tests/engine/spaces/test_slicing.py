@@ -49,6 +49,17 @@ def test_split_histogram_cuts_at_dividers_and_drops_empty_runs():
     assert len(sp.dividers) == 1 and abs(sp.dividers[0]["cut"] - 345) <= 1
 
 
+def test_without_a_scanned_floor_an_empty_run_inside_divides_nothing():
+    # a room whose floor and ceiling were cropped: furniture along two walls, nothing in its 2 m middle
+    h = np.full(600, 40.0)
+    h[200:400] = 0.0
+    h[:120] = 0.0  # and the empty ends beyond its walls still trim the box
+    h[480:] = 0.0
+    assert [p[:2] for p in split_histogram(h, 0, DividerSettings(bin_width=BW)).pieces] == [(120, 200), (400, 480)]
+    sp = split_histogram(h, 0, DividerSettings(bin_width=BW), inner_empties=False)
+    assert [p[:2] for p in sp.pieces] == [(120, 480)] and sp.empties == []
+
+
 def test_two_storeys_are_found_with_the_slab_between():
     h = _z_hist(2)
     floors, divs = find_storeys(h, 0, vertical_params())
