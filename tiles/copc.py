@@ -94,7 +94,7 @@ def write_copc(store: TileStore | str, out: str, *, client=None, overwrite: bool
     cube = cube_for(meta.bounds, meta.scale, 7 if grid_bits is None else grid_bits)
     layout = plan_layout(store, point_format, copc=True)
     header, evlrs = build_header(store, layout)
-    header.vlrs.insert(0, laspy.VLR("copc", 1, "copc info", bytes(INFO.size)))
+    header.vlrs.insert(0, info_placeholder())
     window = export_window(window, client)
     tmp, tmpdir = temporary_file(out, ".laz")
     scratch = scratch_for(store)
@@ -163,17 +163,30 @@ def _write_file(tmp: str, header: laspy.LasHeader, evlrs: list, jobs: list, args
         for result in ordered_map(build_top, top_jobs, args, client, window, "COPC writing top nodes"):
             append(result)
         set_extra_ranges(writer.header, tracked, extra)
-        writer.write_evlrs(VLRList([laspy.VLR("copc", 1000, "copc hierarchy", _hierarchy(entries)), *evlrs]))
-        page_at = int(writer.header.start_of_first_evlr) + _EVLR_HEADER
-        gps = (float(writer.header.min_gps_time), float(writer.header.max_gps_time))
-        writer.close()
-        info = INFO.pack(*cube.center, cube.halfsize, cube.spacing, page_at, ENTRY.size * len(entries), *gps)
-        f.seek(_HEADER_14 + 2)
-        if f.read(16).rstrip(b"\0") != b"copc":
-            raise RuntimeError("COPC: the info VLR is not the first record")
-        f.seek(_HEADER_14 + _VLR_HEADER)
-        f.write(info)
+        finish_file(f, writer, entries, evlrs, (*cube.center, cube.halfsize, cube.spacing))
     return entries
+
+
+def finish_file(f, writer: CopcWriter, entries: list[tuple[NodeKey, int, int, int]], evlrs: list,
+                cube: tuple[float, float, float, float, float]) -> None:
+    """After the last chunk: the hierarchy EVLR (``entries``: node, offset, points, bytes), the other EVLRs, the
+    header, then the info VLR (first in the file, written as a placeholder) with ``cube`` (centre x, y, z,
+    halfsize, spacing) and the hierarchy page's place.  Closes ``writer``; ``f`` stays open."""
+    writer.write_evlrs(VLRList([laspy.VLR("copc", 1000, "copc hierarchy", _hierarchy(entries)), *evlrs]))
+    page_at = int(writer.header.start_of_first_evlr) + _EVLR_HEADER
+    gps = (float(writer.header.min_gps_time), float(writer.header.max_gps_time))
+    writer.close()
+    info = INFO.pack(*cube, page_at, ENTRY.size * len(entries), *gps)
+    f.seek(_HEADER_14 + 2)
+    if f.read(16).rstrip(b"\0") != b"copc":
+        raise RuntimeError("COPC: the info VLR is not the first record")
+    f.seek(_HEADER_14 + _VLR_HEADER)
+    f.write(info)
+
+
+def info_placeholder() -> laspy.VLR:
+    """The COPC info VLR to put first in a header before writing (:func:`finish_file` fills it in)."""
+    return laspy.VLR("copc", 1, "copc info", bytes(INFO.size))
 
 
 def _hierarchy(entries: list[tuple[NodeKey, int, int, int]]) -> bytes:

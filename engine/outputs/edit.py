@@ -2,9 +2,10 @@
 
 An edit reads a finished run's folder (``spaces.geojson``, ``elements.json``,
 ``points.laz``, ``metrics.json``) and writes the edited run into another folder
-(never the original, unless asked): the spaces layer, the elements, a new
-``points.laz`` variant, the statistics, the floor plan, ``building.ifc`` and the report, with an
-``edit`` record in ``metrics.json``.
+(never the original, unless asked): the spaces layer (``spaces.geojson`` and ``spaces.gpkg``), the
+elements, a new ``points.laz`` variant (and ``points.copc.laz`` when the run has one: the same octree, its
+points edited alike, :mod:`tiles.copc_rewrite`), the statistics, the floor plan, ``building.ifc`` and the
+report, with an ``edit`` record in ``metrics.json``.
 
 Merge ``A B ...`` (spaces of one storey, each touching another of them):
 
@@ -200,34 +201,40 @@ def _side(p: np.ndarray, a: np.ndarray, d: np.ndarray) -> float:
     return float(d[0] * (p[1] - a[1]) - d[1] * (p[0] - a[0]))
 
 
+def edit_points(points, record: dict[str, Any]):
+    """One chunk of a run's points (a laspy point record) with the edit applied to ``space_id`` and the points of
+    removed elements dropped."""
+    removed = np.asarray(record.get("removed_elements", []), dtype=np.int64)
+    space = np.asarray(points["space_id"]).copy()
+    for k, v in record.get("space_map", {}).items():
+        space[np.asarray(points["space_id"]) == int(k)] = int(v)
+    if "split" in record:
+        a = np.asarray(record["line"][:2])
+        d = np.asarray(record["line"][2:4]) - a
+        d = d / np.linalg.norm(d)
+        right = (d[0] * (np.asarray(points.y) - a[1]) - d[1] * (np.asarray(points.x) - a[0])) <= 0
+        space[(space == record["split"]) & right] = record["new_space"]
+    points["space_id"] = space
+    if not len(removed):
+        return points
+    keep = ~np.isin(np.asarray(points["element_id"]), removed)
+    return points if keep.all() else points[keep]
+
+
 def rewrite_points(src: str, dst: str, record: dict[str, Any]) -> dict[str, int]:
-    """Stream ``points.laz`` into ``dst`` with the edit applied to ``space_id`` (and removed points dropped)."""
+    """Stream ``points.laz`` into ``dst`` with the edit applied (:func:`edit_points`)."""
     import laspy
 
-    removed = np.asarray(record.get("removed_elements", []), dtype=np.int64)
-    space_map = {int(k): int(v) for k, v in record.get("space_map", {}).items()}
     counts = {"points_in": 0, "points_out": 0, "points_removed": 0}
     tmp = dst + ".tmp.laz"
     with laspy.open(src) as reader, laspy.open(tmp, mode="w", header=reader.header,
                                               do_compress=dst.endswith(".laz")) as writer:
         for chunk in reader.chunk_iterator(CHUNK_POINTS):
-            space = np.asarray(chunk["space_id"]).copy()
-            for k, v in space_map.items():
-                space[space == k] = v
-            if "split" in record:
-                xy = np.stack([np.asarray(chunk.x), np.asarray(chunk.y)], axis=1)
-                a = np.asarray(record["line"][:2])
-                d = np.asarray(record["line"][2:4]) - a
-                d = d / np.linalg.norm(d)
-                right = (d[0] * (xy[:, 1] - a[1]) - d[1] * (xy[:, 0] - a[0])) <= 0
-                space[(space == record["split"]) & right] = record["new_space"]
-            chunk["space_id"] = space
-            keep = ~np.isin(np.asarray(chunk["element_id"]), removed) if len(removed) else np.ones(len(space), bool)
-            counts["points_in"] += len(space)
-            counts["points_removed"] += int((~keep).sum())
-            out = chunk[keep] if not keep.all() else chunk
+            out = edit_points(chunk, record)
+            counts["points_in"] += len(chunk)
             counts["points_out"] += len(out)
             writer.write_points(out)
+    counts["points_removed"] = counts["points_in"] - counts["points_out"]
     os.replace(tmp, dst)
     return counts
 
@@ -246,8 +253,11 @@ def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: i
              line: Sequence[float] | None = None, in_place: bool = False) -> dict[str, Any]:
     """Apply one edit to the run folder ``run`` and write the edited run to ``out``; returns the edit record."""
     from engine.outputs.daylight import layer_with_figures
+    from engine.outputs.geojson import write_spaces_gpkg
     from engine.outputs.plan import draw_plan
     from engine.outputs.report import write_report
+    from tiles.copc_rewrite import rewrite_copc
+    from tiles.crs import parse_crs
 
     run, out = os.path.abspath(run), os.path.abspath(out)
     if (merge is None) == (split is None):
@@ -267,9 +277,18 @@ def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: i
     shutil.rmtree(staging, ignore_errors=True)
     os.makedirs(staging)
     record.update(rewrite_points(os.path.join(run, "points.laz"), os.path.join(staging, "points.laz"), record))
+    if os.path.exists(os.path.join(run, "points.copc.laz")):
+        # the same edit on the COPC octree: same nodes, their points edited (never a stale copy left beside)
+        copc = rewrite_copc(os.path.join(run, "points.copc.laz"), os.path.join(staging, "points.copc.laz"),
+                            lambda points: edit_points(points, record))
+        if copc["points_out"] != record["points_out"]:
+            raise RuntimeError(f"{run}: points.copc.laz holds {copc['points_in']:,} points, points.laz "
+                               f"{record['points_in']:,}: the two files are not of one run")
     layer, stats = layer_with_figures(layer, elements, layer.get("crs_wkt"))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
         json.dump(layer, f)
+    write_spaces_gpkg(layer, os.path.join(staging, "spaces.gpkg"),
+                      parse_crs({"wkt": layer["crs_wkt"]}) if layer.get("crs_wkt") else None)
     with open(os.path.join(staging, "elements.json"), "w") as f:
         json.dump(elements, f, indent=1)
     draw_plan(layer, elements, os.path.join(staging, "floorplan.png"), os.path.join(staging, "floorplan.svg"),

@@ -8,67 +8,15 @@ import numpy as np
 import pytest
 from laspy.copc import Bounds, CopcReader
 
-from tiles.copc import ENTRY, EXTENSION, write_copc
+from tests.tiles.copcdata import OPTS, copc_store, node_entries, rows
+from tiles.copc import EXTENSION, write_copc
 from tiles.errors import UserError
 from tiles.export import export
-from tiles.ingest import ingest
-from tiles.schema import Dimension
-
-
-def _cloud(path, n=6000, seed=3):
-    """Walls and a floor (a surface cloud, dense in one corner) with GPS times, colours and classes."""
-    rng = np.random.default_rng(seed)
-    las = laspy.LasData(laspy.LasHeader(point_format=7, version="1.4"))
-    las.header.scales = np.array([0.001] * 3)
-    las.header.offsets = np.array([1000.0, 2000.0, 0.0])
-    u = rng.uniform(0, 1, (n, 3))
-    side = rng.integers(0, 3, n)
-    x = np.where(side == 0, 0.0, u[:, 0] * 20)
-    y = np.where(side == 1, 0.0, u[:, 1] * 12)
-    z = np.where(side == 2, 0.0, u[:, 2] * 3)
-    dense = rng.uniform(0, 1, n) < 0.4  # a dense patch: deeper levels there
-    x[dense], y[dense] = 1 + u[dense, 0] * 0.5, 1 + u[dense, 1] * 0.5
-    las.x, las.y, las.z = 1000 + x, 2000 + y, z
-    las.gps_time = rng.uniform(10, 20, n)
-    las.red = rng.integers(0, 65535, n)
-    las.classification = rng.integers(0, 20, n)
-    las.intensity = np.arange(n) % 65536
-    las.write(str(path))
-    return las
 
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
-    d = tmp_path_factory.mktemp("copc")
-    _cloud(d / "in.las")
-    st = ingest([str(d / "in.las")], str(d / "s.zarr"), part_points=1000, tile_size=5.0)
-    for t in st.tiles:
-        pi = st.read(t, ["point_index"])["point_index"]
-        st.write_array(t, "classification", (pi % 13).astype(np.uint8))
-        st.write_array(t, "space_id", (pi // 500).astype(np.int32))
-    st.add_dimensions([Dimension("classification", "uint8", "result", "class code"),
-                       Dimension("space_id", "int32", "result", "space id")])
-    return st
-
-
-#: Small enough that 6000 points make several levels, groups and top nodes
-OPTS = {"node_points": 150, "group_points": 900, "grid_bits": 2}
-
-
-def _rows(arr):
-    """The records as sortable rows of bytes (a multiset compare of every field)."""
-    v = np.ascontiguousarray(arr).view(f"V{arr.dtype.itemsize}")
-    return np.sort(v)
-
-
-def _entries(path):
-    with CopcReader.open(str(path)) as r:
-        info = r.copc_info
-        with open(path, "rb") as f:
-            f.seek(info.hierarchy_root_offset)
-            page = f.read(info.hierarchy_root_size)
-        r.header.vlrs.append(r.laszip_vlr)
-        return r.header, info, [ENTRY.unpack_from(page, i) for i in range(0, len(page), ENTRY.size)]
+    return copc_store(tmp_path_factory.mktemp("copc"))
 
 
 @pytest.fixture(scope="module")
@@ -97,9 +45,9 @@ def test_copc_reader_gives_every_point_of_points_laz(written):
                   if v.user_id != "laszip encoded"]
         assert ours == theirs  # class lookup, extra bytes (with their ranges), CRS
     assert pts.array.dtype == ref.points.array.dtype
-    assert np.array_equal(_rows(pts.array), _rows(ref.points.array))
+    assert np.array_equal(rows(pts.array), rows(ref.points.array))
     plain = laspy.read(str(copc))  # a plain LAZ reader reads it too (variable-size chunk table)
-    assert np.array_equal(_rows(plain.points.array), _rows(ref.points.array))
+    assert np.array_equal(rows(plain.points.array), rows(ref.points.array))
     assert rep["levels"] >= 4 and rep["groups"] > 1
 
 
@@ -116,12 +64,12 @@ def test_bounds_query_gives_the_points_inside(written):
     for i, c in enumerate("XYZ"):
         keep &= (a[c] >= mn[i]) & (a[c] <= mx[i])
     assert 0 < keep.sum() < len(a)
-    assert np.array_equal(_rows(got.array), _rows(a[keep]))
+    assert np.array_equal(rows(got.array), rows(a[keep]))
 
 
 def test_nodes_hold_their_points_and_the_hierarchy_is_consistent(written):
     _, copc, _ = written
-    header, info, entries = _entries(copc)
+    header, info, entries = node_entries(copc)
     with open(copc, "rb") as f:
         data = f.read()
     lz = header.vlrs.get("LasZipVlr")[0]
@@ -158,7 +106,7 @@ def test_nodes_hold_their_points_and_the_hierarchy_is_consistent(written):
 
 def test_node_cap_and_even_coarse_levels(written):
     _, copc, _ = written
-    _, info, entries = _entries(copc)
+    _, info, entries = node_entries(copc)
     with CopcReader.open(str(copc)) as r:
         deepest = max(e[0] for e in entries)
         for lv, x, y, z, *_rest, count in entries:

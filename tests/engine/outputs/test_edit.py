@@ -97,6 +97,19 @@ def test_merge_removes_exactly_the_wall_between_two_rooms(finished, tmp_path, ca
                                    p["space_id"][sel])
 
     assert ari(new) > ari(old)
+    # the COPC octree says what points.laz says (same records, edited alike), the GeoPackage what the GeoJSON says
+    assert (finished / "points.copc.laz").is_file()
+    from laspy.copc import CopcReader
+    from pyogrio.raw import read
+
+    with CopcReader.open(str(out / "points.copc.laz")) as r:
+        octree = r.query().array
+    laz = laspy.read(str(out / "points.laz")).points.array
+    assert octree.dtype == laz.dtype and len(octree) == len(laz)
+    assert np.array_equal(np.sort(octree.view(f"V{laz.dtype.itemsize}")), np.sort(laz.view(f"V{laz.dtype.itemsize}")))
+    _, _, _, (ids,) = read(str(out / "spaces.gpkg"), columns=["id"])
+    geo = json.loads((out / "spaces.geojson").read_text())["features"]
+    assert sorted(ids) == sorted(f["properties"]["id"] for f in geo) and min(a, b) in set(ids)
     assert (out / "report.html").is_file() and (out / "floorplan.svg").is_file()
     # the original run is untouched
     assert json.loads((finished / "elements.json").read_text()) == before
