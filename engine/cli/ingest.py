@@ -32,6 +32,7 @@ examples:
   buildingparser ingest building.laz building.zarr
   buildingparser ingest Stanford3dDataset_v1.2/Area_1 area1.zarr --tile-size 20
   buildingparser ingest s3://bucket/scan.laz s3://bucket/scan.zarr --scheduler tls://head:8786
+  buildingparser ingest campus.copc.laz hall.zarr --bounds 512300 5402100 512420 5402180
 """
 
 
@@ -45,6 +46,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="tile edge in metres (default: buildingparser.tiles.size, 10)")
     parser.add_argument("--part-points", type=int, metavar="N",
                         help="points read by one task (default: buildingparser.ingest.part-points)")
+    parser.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
+                        help="only the points inside this box (the inputs' x, y, inclusive): a COPC file is read "
+                             "by bounds, only the octree nodes the box meets")
     parser.add_argument("--skip-bad-lines", action="store_true",
                         help="skip (and count) text lines that cannot be read instead of stopping")
     add_storage_options(parser)
@@ -56,7 +60,9 @@ def run(args: argparse.Namespace) -> int:
 
     from engine.pipeline.cluster import check_reachable, cluster_client
     from tiles.ingest import ingest, precheck
+    from tiles.ingest.bounds import Bounds
 
+    Bounds.parse(args.bounds)  # bad bounds are refused before the cluster starts
     precheck(args.sources, args.store, overwrite=args.overwrite, storage_options=args.storage_options)
     settings = {"buildingparser.ingest.bad-lines": "skip"} if args.skip_bad_lines else {}
     with dask.config.set(settings), cluster_client(args.scheduler, n_workers=args.workers,
@@ -64,9 +70,11 @@ def run(args: argparse.Namespace) -> int:
         check_reachable(client, *args.sources, args.store)
         store = ingest(args.sources, args.store, client=client, overwrite=args.overwrite,
                        tile_size=args.tile_size, part_points=args.part_points,
-                       storage_options=args.storage_options)
+                       storage_options=args.storage_options, bounds=args.bounds)
     rep = store.ingest_report
     print(f"ingested {rep['points']:,} points from {rep['sources']} source(s) into {store.url}: "
           f"{rep['tiles']} tiles, {rep['seconds']:.1f} s, {rep['points_per_second']:,.0f} points/s")
+    if "outside" in rep:
+        print(f"left out: {rep['outside']:,} points outside the bounds {' '.join(f'{v:g}' for v in rep['bounds'])}")
     sys.stdout.flush()
     return 0

@@ -31,6 +31,7 @@ examples:
   buildingparser run scan.laz --out results/
   buildingparser run s3://bucket/area.laz --out s3://bucket/results --scheduler tcp://cluster:8786
   buildingparser run Area_1/ --out area1/ --workers 2 --memory-limit 8GiB
+  buildingparser run s3://bucket/campus.copc.laz --out hall/ --bounds 512300 5402100 512420 5402180
 """
 
 
@@ -43,6 +44,8 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "colour-free one for a cloud without colour (...detection.colour-free-model)")
     p.add_argument("--store", metavar="STORE", help="where to build the tile store (default DIR/store.zarr)")
     p.add_argument("--tile-size", type=float, metavar="M", help="tile edge in metres for a new store")
+    p.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
+                   help="only the points inside this box (the input's x, y; a COPC file is read by bounds)")
     p.add_argument("--force", action="store_true", help="redo every stage even when its earlier result is current")
     p.add_argument("--no-crf", action="store_true", help="keep every detection proposal (skip the CRF)")
     p.add_argument("--no-update", action="store_true", help="do not update the spaces from detected walls")
@@ -78,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
         options = RunSettings(model=args.model, store=args.store, force=args.force, crf=not args.no_crf,
                               update=not args.no_update, export_points=not args.no_points,
-                              tile_size=args.tile_size, storage_options=args.storage_options)
+                              tile_size=args.tile_size, storage_options=args.storage_options, bounds=args.bounds)
         check_run_inputs(args.input, options)  # a missing input is refused before DIR is made
         if scheduler_address(args.scheduler):  # an existing cluster: only connecting, which may fail (one line)
             starting.client()  # ... before DIR is made

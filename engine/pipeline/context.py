@@ -34,6 +34,7 @@ class RunSettings:
     export_points: bool = True  # write points.laz
     tile_size: float | None = None
     storage_options: dict[str, Any] | None = None
+    bounds: list[float] | None = None  # only the points inside XMIN YMIN XMAX YMAX (tiles.ingest.bounds)
 
 
 def check_run_inputs(input: str, options: RunSettings) -> None:
@@ -48,10 +49,14 @@ def check_run_inputs(input: str, options: RunSettings) -> None:
     from tiles import paths
     from tiles.errors import UserError
     from tiles.ingest import check_source
+    from tiles.ingest.bounds import Bounds
 
+    Bounds.parse(options.bounds)
     url = paths.normalize(input)
     if not paths.exists(paths.join(url, "zarr.json"), options.storage_options):  # not a tile store
         check_source(url, options.storage_options)
+    elif options.bounds is not None:
+        raise UserError(url, "is a tile store: --bounds selects points while a file is ingested")
     if options.model is not None:
         stem = os.fspath(options.model)  # engine.detection.model.model_stem, without importing the detector
         stem = stem[:-4] if stem.endswith(".npz") else stem[:-5] if stem.endswith(".json") else stem

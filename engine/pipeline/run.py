@@ -321,7 +321,7 @@ def _ingest_stage(input: str, out: str, client, opt: RunSettings,
         return store, fp
     url = paths.normalize(opt.store) if opt.store else paths.join(out, "store.zarr")
     fp = fingerprint("ingest", {"sources": _source_identity(input, opt.storage_options), "store": url,
-                                "tile_size": opt.tile_size})
+                                "tile_size": opt.tile_size, **({"bounds": opt.bounds} if opt.bounds else {})})
     if not opt.force and is_store(url, opt.storage_options):
         try:
             store = open_store(url, opt.storage_options)
@@ -333,10 +333,14 @@ def _ingest_stage(input: str, out: str, client, opt: RunSettings,
             pass  # unfinished or foreign: ingest again
     with Timer() as t:
         store = ingest([input], url, client=client, overwrite=True, tile_size=opt.tile_size,
-                       storage_options=opt.storage_options, accept=lambda facts: check_cloud(facts, input))
+                       storage_options=opt.storage_options, accept=lambda facts: check_cloud(facts, input),
+                       bounds=opt.bounds)
     timings["ingest"] = t.seconds
     StageLog(store).write(StageRecord("ingest", fp, "ok", t.seconds, outputs={"points": store.meta.point_count}))
     logger.info("ingest: %s points into %s (%.1f s)", f"{store.meta.point_count:,}", url, t.seconds)
+    if opt.bounds:
+        logger.info("ingest: %s points of the input lie outside the bounds %s and are left out",
+                    f"{getattr(store, 'ingest_report', {}).get('outside', 0):,}", " ".join(f"{v:g}" for v in opt.bounds))
     return store, fp
 
 

@@ -25,6 +25,7 @@ from tiles.builder import StoreBuilder
 from tiles.config import setting
 from tiles.crs import same_crs
 from tiles.errors import UserError
+from tiles.ingest.bounds import Bounds, keep_inside
 from tiles.ingest.files import is_dir
 from tiles.ingest.reader import Quantization, Reader, complete_columns, offset_near, union_dimensions
 from tiles.schema import Part, Source
@@ -177,11 +178,12 @@ def merged_las(readers: list[Reader], dims) -> dict[str, Any] | None:
     return las
 
 
-def _stage(item, builder: StoreBuilder, grid: Quantization):
+def _stage(item, builder: StoreBuilder, grid: Quantization, box: tuple[int, int, int, int] | None = None):
     """One task: read the parts of one spec and stage each; ``[(summary or None, stats), ...]``.
 
     A spec that plans no parts (a check, such as counting S3DIS room file lines)
-    gives its facts with ``None`` for a summary.
+    gives its facts with ``None`` for a summary.  With ``box`` (raw x, y on the
+    store's grid) only the points inside are staged (:mod:`tiles.ingest.bounds`).
     """
     first_part, reader, spec = item
     expected = reader.parts_of(spec)
@@ -189,14 +191,21 @@ def _stage(item, builder: StoreBuilder, grid: Quantization):
         return [(None, res.stats) for res in reader.read(spec, grid)]
     out = []
     for k, res in enumerate(reader.read(spec, grid)):
+        res = res if box is None else keep_inside(res, box)
         order = None
-        if res.records is not None:  # sort the records whole, then unpack them (see PartResult)
+        if res.records is not None and len(res.records) == 0:  # nothing inside the bounds: no sort
+            stats = res.stats
+            res = res.unpack(res.records)
+            res.stats = {**stats, **res.stats}
+        elif res.records is not None:  # sort the records whole, then unpack them (see PartResult)
             order = builder.tile_order(res.columns["x"], res.columns["y"])
             rec = np.ascontiguousarray(res.records)
             void = f"V{rec.dtype.itemsize}"
             srt = scratch.buffer("sorted records", rec.nbytes).view(void)
             np.take(rec.view(void), order.order, out=srt, mode="clip")  # "clip": unbuffered; order is in range
+            stats = res.stats
             res = res.unpack(srt.view(rec.dtype))  # (unpack copies: nothing keeps the scratch buffer)
+            res.stats = {**stats, **res.stats}
         n = len(res.columns["x"])
         cols = complete_columns(res.columns, builder.dimensions, n)
         out.append((builder.write_part(first_part + k, cols, order=order), res.stats))
@@ -212,7 +221,8 @@ class IngestReport(dict):
 def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: bool = False,
            tile_size: float | None = None, part_points: int | None = None,
            storage_options: dict[str, Any] | None = None,
-           accept: Callable[[CloudFacts], None] | None = None) -> TileStore:
+           accept: Callable[[CloudFacts], None] | None = None,
+           bounds: Sequence[float] | Bounds | None = None) -> TileStore:
     """Read point clouds into a new tile store and return it.
 
     Parameters
@@ -234,11 +244,16 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
         Called with the :class:`CloudFacts` of the points read, before the
         tiles are written; an exception it raises ends the ingest (nothing is
         left of the store).
+    bounds
+        ``(xmin, ymin, xmax, ymax)`` in the inputs' coordinates: only the points
+        inside are stored, in their order (a COPC file is read by bounds:
+        :mod:`tiles.ingest.bounds`); ``ingest_report["outside"]`` counts the rest.
 
     The report (points, seconds, warnings) is in ``store.ingest_report``.
     """
     t0 = time.perf_counter()
     sources = _source_list(sources)
+    bounds = Bounds.parse(bounds)
     part_points = _part_points(part_points)
     store = paths.normalize(store)
     if store in {paths.normalize(s) for s in sources}:
@@ -246,6 +261,8 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
     if paths.exists(store, storage_options) and not overwrite:
         raise UserError(store, "already exists: choose another name or pass --overwrite")
     readers = open_sources(sources, storage_options)
+    for r in readers if bounds is not None else []:
+        r.restrict(bounds)
     _number_ground_truth_ids(readers)
     dims = union_dimensions(readers)
     grid = choose_grid(readers)
@@ -257,11 +274,15 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
         items, owners = _plan_parts(readers, part_points)
         results = run_tasks(_stage, items, client=client, label="reading parts",
                             keys=[f"{os.path.basename(r.path)}#{k}" for k, (_, r, _) in enumerate(items)],
-                            extra_args=(builder, grid))
-        summaries, parts, counts, stats = _collect_parts(readers, owners, results)
+                            extra_args=(builder, grid, None if bounds is None else bounds.raw_box(grid)))
+        summaries, parts, counts, stats = _collect_parts(readers, owners, results, bounds)
         if accept is not None:
             accept(cloud_facts(summaries, grid, builder.tile_size))
         infos = [r.source_info(st) for r, st in zip(readers, stats)]
+        for r, info, n, st in zip(readers, infos, counts, stats) if bounds is not None else []:
+            # every point of the source not stored lies outside: filtered, or in a COPC node the box misses
+            info.update(bounds=bounds.to_list(), outside_bounds=(r.expected_count - n) if r.expected_count
+                        is not None else sum(s.get("outside", 0) for s in st))
         srcs = [Source(r.path, r.format, n, info) for r, n, info in zip(readers, counts, infos)]
         docs = _ground_truth_docs(readers, stats, grid)
         result = builder.finalize(summaries, parts=parts, sources=srcs, client=client, crs=crs, las=las, docs=docs)
@@ -276,6 +297,8 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
     result.ingest_report = IngestReport(points=total, seconds=seconds, points_per_second=total / max(seconds, 1e-9),
                                         sources=len(readers), parts=len(parts), tiles=len(result.meta.tiles),
                                         warnings=notes)
+    if bounds is not None:
+        result.ingest_report.update(bounds=bounds.to_list(), outside=sum(i["outside_bounds"] for i in infos))
     return result
 
 
@@ -340,10 +363,10 @@ def _plan_parts(readers: list[Reader], part_points: int) -> tuple[list[tuple[int
     return items, owners
 
 
-def _collect_parts(readers: list[Reader], owners: list[int], results: list) -> tuple[list, list[Part], list[int],
-                                                                                       list[list[dict]]]:
+def _collect_parts(readers: list[Reader], owners: list[int], results: list, bounds: Bounds | None = None
+                   ) -> tuple[list, list[Part], list[int], list[list[dict]]]:
     """The tasks' results gathered: the part summaries, the parts, the points and the stats of each source;
-    an error where a source gave other than its header's count."""
+    an error where a source gave other than its header's count (its points inside and outside ``bounds``)."""
     summaries, parts = [], []
     counts = [0] * len(readers)
     stats: list[list[dict]] = [[] for _ in readers]
@@ -356,8 +379,11 @@ def _collect_parts(readers: list[Reader], owners: list[int], results: list) -> t
             counts[si] += summary.count
             summaries.append(summary)
     for r, n in zip(readers, counts):
-        if r.expected_count is not None and n != r.expected_count:
+        if r.expected_count is not None and n != r.expected_count and bounds is None:
             raise UserError(r.path, f"read {n:,} points but the header counts {r.expected_count:,}")
+    if bounds is not None and sum(counts) == 0:
+        raise UserError(readers[0].path if len(readers) == 1 else None,
+                        f"no point inside the bounds {' '.join(f'{v:g}' for v in bounds.to_list())}")
     return summaries, parts, counts, stats
 
 

@@ -199,6 +199,21 @@ class LasReader(Reader):
     def las_facts(self) -> dict[str, Any]:
         return self._facts
 
+    def restrict(self, bounds: Any) -> None:
+        """A COPC file read by bounds: only the chunks of the octree nodes whose cube meets the box."""
+        if not self.copc or self.chunks is None:
+            return
+        from tiles.ingest.bounds import copc_chunks_inside
+        from tiles.ingest.copc import node_table
+
+        with open_binary(self.path, self.storage_options) as f:
+            header = laspy.LasHeader.read_from(f)
+            info = copc_info(header)
+            nodes = node_table(f, info)
+        lo, hi = nodes.bounds(info)
+        first_byte = self.offset_to_points + 8 + np.r_[0, np.cumsum(self._table[:, 1])[:-1]]
+        self._chunk_keep = copc_chunks_inside(nodes.offsets, lo, hi, first_byte, bounds)
+
     def plan(self, part_points: int) -> list[Any]:
         n = self.expected_count
         if not self.compressed:
@@ -206,14 +221,18 @@ class LasReader(Reader):
         if self.chunks is None:
             return [("sequential", part_points)]
         table = self._table
+        keep = getattr(self, "_chunk_keep", None)
+        keep = np.ones(len(table), dtype=bool) if keep is None else keep
         first_byte = self.offset_to_points + 8 + np.r_[0, np.cumsum(table[:, 1])]
         first_point = np.r_[0, np.cumsum(table[:, 0])]
         specs, lo = [], 0
         for hi in range(1, len(table) + 1):
-            if first_point[hi] - first_point[lo] >= part_points or hi == len(table):
-                specs.append(("chunks", int(first_point[lo]), int(first_point[hi] - first_point[lo]),
-                              int(first_byte[lo]), int(first_byte[hi] - first_byte[lo]),
-                              [(int(p), int(b)) for p, b in table[lo:hi]]))
+            # a spec is a run of chunks to read, ending at part_points, at the last chunk or before one skipped
+            if first_point[hi] - first_point[lo] >= part_points or hi == len(table) or keep[hi] != keep[lo]:
+                if keep[lo]:
+                    specs.append(("chunks", int(first_point[lo]), int(first_point[hi] - first_point[lo]),
+                                  int(first_byte[lo]), int(first_byte[hi] - first_byte[lo]),
+                                  [(int(p), int(b)) for p, b in table[lo:hi]]))
                 lo = hi
         return specs
 

@@ -134,6 +134,11 @@ class Reader:
         """Header facts and records needed to write this source's LAS flavour back (LAS only)."""
         return None
 
+    def restrict(self, bounds: Any) -> None:
+        """Only the points inside ``bounds`` (:class:`tiles.ingest.bounds.Bounds`) are wanted: a reader that can
+        skip the data outside (a COPC file's octree nodes) plans fewer reads; the parts are filtered anyway."""
+        return None
+
     def plan(self, part_points: int) -> list[Any]:
         """Small picklable specs, one per task, in point order."""
         raise NotImplementedError
