@@ -12,8 +12,6 @@ temporary name and renamed when complete.  Design: docs/design/tiles.md, "COPC".
 """
 from __future__ import annotations
 
-import os
-import shutil
 import struct
 import time
 from collections import defaultdict
@@ -23,15 +21,14 @@ import laspy
 import numpy as np
 from laspy.vlrs.vlrlist import VLRList
 
-from tiles import paths
 from tiles.config import setting
 from tiles.copc_octree import Cube, ancestors, cube_for, plan_groups
-from tiles.copc_units import NodeKey, build_group, build_top, group_runs, ordered_map, stage_tile
+from tiles.copc_units import NodeKey, build_group, build_top, group_runs, stage_tile
 from tiles.errors import UserError
-from tiles.export import ChunkedLasWriter, export_window, publish_file, temporary_file
+from tiles.export import ChunkedLasWriter, export_window, publishing, temporary_file
 from tiles.export_header import build_header, grow_header, set_extra_ranges, tracked_extra_bytes
 from tiles.export_layout import plan_layout
-from tiles.export_units import scratch_for
+from tiles.export_units import ordered_map, scratch_for
 from tiles.store import TileStore
 from tiles.tasks import run_tasks
 
@@ -98,7 +95,7 @@ def write_copc(store: TileStore | str, out: str, *, client=None, overwrite: bool
     window = export_window(window, client)
     tmp, tmpdir = temporary_file(out, ".laz")
     scratch = scratch_for(store)
-    try:
+    with publishing(tmp, tmpdir, out, scratch, store, storage_options):
         tiles = sorted(meta.tiles, key=lambda t: -t.count)
         staged = run_tasks(stage_tile, tiles, client=client, label="COPC staging tiles",
                            keys=[t.name for t in tiles], extra_args=(store, layout, scratch, cube))
@@ -109,15 +106,6 @@ def write_copc(store: TileStore | str, out: str, *, client=None, overwrite: bool
         args = (layout, scratch, store.storage_options, cube, cap, tracked_extra_bytes(header),
                 (list(meta.scale), list(meta.offset)))
         entries = _write_file(tmp, header, evlrs, jobs, args, cube, client, window)
-        publish_file(tmp, out, storage_options)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
-    finally:
-        paths.remove(scratch, store.storage_options)
-        if tmpdir is not None:
-            shutil.rmtree(tmpdir, ignore_errors=True)
     seconds = time.perf_counter() - t0
     written = sum(e[2] for e in entries)
     return {"path": out, "points": written, "seconds": seconds, "points_per_second": written / max(seconds, 1e-9),
@@ -154,13 +142,14 @@ def _write_file(tmp: str, header: laspy.LasHeader, evlrs: list, jobs: list, args
             grow_header(writer.header, stats, extra)
 
         for (k, group, _), result in zip(jobs, ordered_map(build_group, jobs, args, client, window,
-                                                          "COPC writing groups")):
+                                                          "COPC writing groups", "copc-groups")):
             append(result)
             above = ancestors(group.level, group.key)
             for d, first, n in result[3]:
                 tops[(d, *above[d][1])].append((k, first, n))  # type: ignore[arg-type]
         top_jobs = sorted(tops.items())
-        for result in ordered_map(build_top, top_jobs, args, client, window, "COPC writing top nodes"):
+        for result in ordered_map(build_top, top_jobs, args, client, window, "COPC writing top nodes",
+                                  "copc-nodes"):
             append(result)
         set_extra_ranges(writer.header, tracked, extra)
         finish_file(f, writer, entries, evlrs, (*cube.center, cube.halfsize, cube.spacing))

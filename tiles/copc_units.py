@@ -13,24 +13,19 @@ Every node is one chunk, however many tiles it spans.  Design: docs/design/tiles
 """
 from __future__ import annotations
 
-import collections
 import io
 import struct
-import uuid
-from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
 
 from tiles import paths
-from tiles.config import setting
 from tiles.copc_octree import BITS, Cube, Group, assign_levels, morton, node_order, point_cells
 from tiles.export_header import UnitStats, unit_stats
 from tiles.export_layout import Layout, pack_part
 from tiles.export_units import read_range, write_bytes
 from tiles.schema import TileInfo
 from tiles.store import TileStore
-from tiles.tasks import Progress
 
 #: A node: (level, x, y, z)
 NodeKey = tuple[int, int, int, int]
@@ -155,31 +150,3 @@ def build_top(job: tuple[NodeKey, list[tuple[int, int, int]]], layout: Layout, s
     recs = arr[order]
     data, table = compress_chunks(recs, np.zeros(1, np.int64), pf.id, pf.num_extra_bytes)
     return data, [(key, table[0][0], table[0][1])], unit_stats(recs, pf, tracked), []
-
-
-def ordered_map(fn: Callable[..., ChunkResult], jobs: list, args: tuple, client, window: int,
-                label: str) -> Iterator[ChunkResult]:
-    """``fn(job, *args)`` of every job, in order, at most ``window`` tasks in flight (none without a client)."""
-    progress = Progress(label, len(jobs))
-    if client is None:
-        for job in jobs:
-            yield fn(job, *args)
-            progress.update()
-        return
-    retries = setting("retries")
-    pending: collections.deque = collections.deque()
-    nxt = 0
-    try:
-        while nxt < len(jobs) or pending:
-            while nxt < len(jobs) and len(pending) < window:
-                pending.append(client.submit(fn, jobs[nxt], *args, pure=False, retries=retries,
-                                             key=f"copc-{label.split()[-1]}-{nxt}-{uuid.uuid4().hex[:6]}"))
-                nxt += 1
-            fut = pending.popleft()
-            result = fut.result()
-            fut.release()
-            yield result
-            progress.update()
-    finally:
-        for f in pending:
-            f.cancel()

@@ -12,11 +12,13 @@ story: docs/design/tiles.md, "Exporting".
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import struct
 import time
 import uuid
+from collections.abc import Iterator
 from typing import Any
 
 import laspy
@@ -92,21 +94,12 @@ def export(store: TileStore | str, out: str, *, client=None, overwrite: bool = F
     tmp, tmpdir = temporary_file(out, ext)
     written = 0
     scratch = scratch_for(store)
-    try:
+    with publishing(tmp, tmpdir, out, scratch, store, storage_options):
         jobs = stage_tiles(store, layout, scratch, unit, client)
         written = _write_file(tmp, header, evlrs, jobs, layout, scratch, store, client=client, window=window,
                               compress=ext == ".laz")
         if written != store.meta.point_count:
             raise RuntimeError(f"export wrote {written} points of {store.meta.point_count}")
-        publish_file(tmp, out, storage_options)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
-    finally:
-        paths.remove(scratch, store.storage_options)
-        if tmpdir is not None:
-            shutil.rmtree(tmpdir, ignore_errors=True)
     seconds = time.perf_counter() - t0
     return {"path": out, "points": written, "seconds": seconds, "points_per_second": written / max(seconds, 1e-9),
             "point_format": layout.point_format, "extra_dimensions": [e["name"] for e in layout.extra]}
@@ -154,6 +147,24 @@ def _write_file(tmp: str, header: laspy.LasHeader, evlrs: list, jobs: list[UnitJ
             writer.write_evlrs(VLRList(evlrs))
         writer.close()
     return written
+
+
+@contextlib.contextmanager
+def publishing(tmp: str, tmpdir: str | None, out: str, scratch: str, store: TileStore,
+               storage_options: dict[str, Any] | None) -> Iterator[None]:
+    """Around the writing of ``tmp`` (:func:`temporary_file`): published as ``out`` when the block ends well,
+    removed when it fails; the store's ``scratch`` and the temporary folder removed either way."""
+    try:
+        yield
+        publish_file(tmp, out, storage_options)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+    finally:
+        paths.remove(scratch, store.storage_options)
+        if tmpdir is not None:
+            shutil.rmtree(tmpdir, ignore_errors=True)
 
 
 def publish_file(tmp: str, out: str, storage_options: dict[str, Any] | None) -> None:

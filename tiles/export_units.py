@@ -16,7 +16,7 @@ import io
 import os
 import struct
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -162,10 +162,18 @@ def ordered_results(jobs: list[UnitJob], layout: Layout, scratch: str, storage_o
                     client, window: int, compress: bool,
                     tracked: list[tuple[str, list[Any] | None]]) -> Iterator[UnitResult]:
     """:func:`gather_unit` of every unit, in order, at most ``window`` unit tasks in flight."""
-    progress = Progress("writing points", len(jobs))
+    return ordered_map(gather_unit, jobs, (layout, scratch, storage_options, compress, tracked), client, window,
+                       "writing points", "export-unit")
+
+
+def ordered_map(fn: Callable[..., Any], jobs: list, args: tuple, client, window: int, label: str,
+                key: str) -> Iterator[Any]:
+    """``fn(job, *args)`` of every job, in order, at most ``window`` tasks in flight (none without a client), with
+    progress under ``label``; the tasks' keys start with ``key``."""
+    progress = Progress(label, len(jobs))
     if client is None:
         for job in jobs:
-            yield gather_unit(job, layout, scratch, storage_options, compress, tracked)
+            yield fn(job, *args)
             progress.update()
         return
     retries = setting("retries")
@@ -174,9 +182,8 @@ def ordered_results(jobs: list[UnitJob], layout: Layout, scratch: str, storage_o
     try:
         while nxt < len(jobs) or pending:
             while nxt < len(jobs) and len(pending) < window:
-                pending.append(client.submit(gather_unit, jobs[nxt], layout, scratch, storage_options, compress,
-                                             tracked, pure=False, retries=retries,
-                                             key=f"export-unit-{nxt}-{uuid.uuid4().hex[:6]}"))
+                pending.append(client.submit(fn, jobs[nxt], *args, pure=False, retries=retries,
+                                             key=f"{key}-{nxt}-{uuid.uuid4().hex[:6]}"))
                 nxt += 1
             fut = pending.popleft()
             result = fut.result()

@@ -278,11 +278,7 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
         summaries, parts, counts, stats = _collect_parts(readers, owners, results, bounds)
         if accept is not None:
             accept(cloud_facts(summaries, grid, builder.tile_size))
-        infos = [r.source_info(st) for r, st in zip(readers, stats)]
-        for r, info, n, st in zip(readers, infos, counts, stats) if bounds is not None else []:
-            # every point of the source not stored lies outside: filtered, or in a COPC node the box misses
-            info.update(bounds=bounds.to_list(), outside_bounds=(r.expected_count - n) if r.expected_count
-                        is not None else sum(s.get("outside", 0) for s in st))
+        infos = _source_infos(readers, counts, stats, bounds)
         srcs = [Source(r.path, r.format, n, info) for r, n, info in zip(readers, counts, infos)]
         docs = _ground_truth_docs(readers, stats, grid)
         result = builder.finalize(summaries, parts=parts, sources=srcs, client=client, crs=crs, las=las, docs=docs)
@@ -300,6 +296,17 @@ def ingest(sources: Sequence[str] | str, store: str, *, client=None, overwrite: 
     if bounds is not None:
         result.ingest_report.update(bounds=bounds.to_list(), outside=sum(i["outside_bounds"] for i in infos))
     return result
+
+
+def _source_infos(readers: list[Reader], counts: list[int], stats: list[list[dict]], bounds: Bounds | None
+                  ) -> list[dict[str, Any]]:
+    """Each source's record for the store; with ``bounds``, the box and how many of its points lie outside."""
+    infos = [r.source_info(st) for r, st in zip(readers, stats)]
+    for r, info, n, st in zip(readers, infos, counts, stats) if bounds is not None else []:
+        # every point of the source not stored lies outside: filtered, or in a COPC node the box misses
+        info.update(bounds=bounds.to_list(), outside_bounds=(r.expected_count - n) if r.expected_count
+                    is not None else sum(s.get("outside", 0) for s in st))
+    return infos
 
 
 @dataclass
