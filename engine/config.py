@@ -95,6 +95,8 @@ SETTINGS: dict[str, Any] = {
         "reveal-classes": "classes", "reveal-thin-voxels": "int >= 0", "reveal-grow": "float >= 0",
         "reveal-quantile": "float in [0, 0.5)", "solid-classes": "classes", "solid-edge": "float >= 0",
         "box-fit": "bool", "rescore": "bool", "label-margin": "float >= 0",
+        "planar-classes": "classes", "planar-depth": "float > 0", "planar-beside": "float > 0",
+        "planar-quantile": "float in [0, 0.5)",
         "colour-free-model": "one of auto, always, never",
         "train": {
             "c": "float > 0", "rounds": "int >= 0", "max-stride": "float > 0",

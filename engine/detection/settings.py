@@ -36,6 +36,10 @@ class DetectionSettings:
     label_margin: float = 0.02
     box_fit: bool = True
     rescore: bool = True
+    planar_classes: tuple[str, ...] = ()
+    planar_depth: float = 0.15
+    planar_beside: float = 0.3
+    planar_quantile: float = 0.005
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -50,7 +54,9 @@ class DetectionSettings:
             raise ValueError(f"surface-choice must be one of {', '.join(SURFACE_CHOICES)}, got {self.surface_choice!r}")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
-        for name in ("one_per_space", "refine_classes"):
+        if self.planar_depth <= 0 or self.planar_beside <= 0 or not 0 <= self.planar_quantile < 0.5:
+            raise ValueError("planar-depth and planar-beside must be > 0, planar-quantile in [0, 0.5)")
+        for name in ("one_per_space", "refine_classes", "planar_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

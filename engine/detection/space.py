@@ -21,6 +21,7 @@ from engine.detection.pointindex import PointIndex
 from engine.detection.proposals import Proposal
 from engine.detection.reveal import refine_reveals
 from engine.detection.settings import DetectionSettings
+from engine.detection.planar import fit_planar
 from engine.detection.surfaces import refine_surfaces
 from engine.detection.volume import SpaceVolume
 from engine.spaces.points import SpacePoints
@@ -92,6 +93,10 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     if settings.refine and index is not None and model.rescorer is not None and settings.rescore:
         score = model.rescorer.apply(score, cls_all, lo_m, hi_m, index.points_in_metric,
                                      np.asarray(vol.frame.extent, float))
+    if settings.refine and index is not None and settings.planar_classes:
+        # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)
+        fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
+                   settings.planar_beside, settings.planar_quantile)
     return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat)
 
 

@@ -1,0 +1,71 @@
+"""A board's box along the wall's normal fitted to its points: bare or with a tray, never a chair in front."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.detection.planar import fit_depth, fit_planar, wall_plane
+from engine.detection.settings import DetectionSettings
+from tiles.classes import ELEMENT_CLASSES
+
+NOISE = 0.002
+WALL = 3.0  # the wall's face at x = 3.0, the room at x < 3.0
+
+
+def _scene(rng, tray: bool, chair: bool) -> np.ndarray:
+    """A wall face (x = WALL, y 0-6, z 0-3), a 2 cm board on it (y 2-4, z 1-2), maybe a tray, maybe a chair."""
+    n = 40000
+    y, z = rng.uniform(0, 6, n), rng.uniform(0, 3, n)
+    on_board = (y > 2) & (y < 4) & (z > 1) & (z < 2)
+    x = np.where(on_board, WALL - 0.02, WALL)  # the board hides the wall behind it
+    parts = [np.column_stack([x, y, z])]
+    edge = rng.uniform(0, 0.02, 400)  # its edges, seen at an angle
+    parts.append(np.column_stack([WALL - edge, np.where(rng.uniform(size=400) < 0.5, 2.0, 4.0), rng.uniform(1, 2, 400)]))
+    if tray:  # 6 cm deep, 60 % of the width, at the bottom
+        m = 300
+        parts.append(np.column_stack([WALL - rng.uniform(0.0, 0.06, m), rng.uniform(2.4, 3.6, m), np.full(m, 1.0)]))
+    if chair:  # a chair's back 40 cm in front
+        m = 3000
+        parts.append(np.column_stack([WALL - 0.4 + rng.uniform(0, 0.05, m), rng.uniform(2.8, 3.3, m),
+                                      rng.uniform(0.5, 1.1, m)]))
+    pts = np.concatenate(parts)
+    return pts + rng.normal(0, NOISE, pts.shape) * np.array([1, 0, 0])
+
+
+def _fit(pts, lo, hi, classes=("board",)):
+    lo_m, hi_m = np.array([lo], float), np.array([hi], float)
+    n = fit_planar(lo_m, hi_m, np.array([ELEMENT_CLASSES.index("board")]),
+                   lambda a, b: pts[np.all((pts >= a) & (pts <= b), axis=1)], classes, 0.15, 0.3, 0.005)
+    return n, lo_m[0], hi_m[0]
+
+
+@pytest.mark.parametrize("tray, chair", [(False, False), (True, False), (False, True)])
+def test_the_box_runs_from_the_wall_to_the_front_of_the_board_and_its_tray(tray, chair):
+    pts = _scene(np.random.default_rng(4), tray, chair)
+    # a detection on the voxel grid: 10 cm deep, straddling the wall, a little wider than the board
+    n, lo, hi = _fit(pts, [2.9, 1.95, 0.95], [3.0, 4.05, 2.05])
+    assert n == 1
+    front = 0.06 if tray else 0.02
+    assert hi[0] == pytest.approx(WALL, abs=3 * NOISE)
+    assert lo[0] == pytest.approx(WALL - front, abs=3 * NOISE)  # the chair 40 cm out is not the board's
+    assert (lo[1], hi[1], lo[2], hi[2]) == (1.95, 4.05, 0.95, 2.05)  # the other sides stay
+
+
+def test_no_fit_without_wall_beside_or_for_other_classes():
+    pts = _scene(np.random.default_rng(5), False, False)
+    wide = _fit(pts, [2.9, -0.5, 0.95], [3.0, 6.5, 2.05])  # the box spans the whole wall: no wall beside it
+    assert wide[0] == 0 and wide[1][0] == 2.9 and wide[2][0] == 3.0
+    assert _fit(pts, [2.9, 1.95, 0.95], [3.0, 4.05, 2.05], classes=("window",))[0] == 0
+
+
+def test_the_wall_plane_is_the_densest_plane():
+    rng = np.random.default_rng(6)
+    v = np.concatenate([rng.normal(1.234, NOISE, 5000), rng.uniform(1.0, 1.5, 500)])
+    assert wall_plane(v) == pytest.approx(1.234, abs=NOISE)
+    assert wall_plane(v[:5]) is None and fit_depth(v, v[:5], 0.15, 0.005) is None
+
+
+def test_the_setting_is_off_by_default_and_checked():
+    assert DetectionSettings().planar_classes == ()
+    with pytest.raises(ValueError, match="planar-depth"):
+        DetectionSettings(planar_depth=0)
