@@ -54,7 +54,7 @@ def tight_boxes(store, elements: list[dict]) -> list[dict]:
 
 
 def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list[str] | None = None,
-             tight: bool = False) -> dict:
+             tight: bool = False, styles: str = "classic") -> dict:
     """Per-class AP (fractions) of the four rankings, keyed by their names, plus ``seconds``."""
     from distributed import Client, LocalCluster
 
@@ -77,7 +77,7 @@ def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list
             paths = list(stores or [])
             for s in ([] if stores else seeds):
                 out = os.path.join(tmp, f"b{s}.zarr")
-                generate(out, seed=s, area_m2=area, yaw=synthetic_yaw(s), client=client)
+                generate(out, seed=s, area_m2=area, yaw=synthetic_yaw(s), client=client, styles=styles)
                 paths.append(out)
             props, gts = [], []
             for i, path in enumerate(paths):
@@ -117,8 +117,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--stores", nargs="+", help="evaluate these tile stores (with ground truth) instead")
     parser.add_argument("--tight-gt", action="store_true",
                         help="score against the tightest box of each element's points (S3DIS's convention)")
+    parser.add_argument("--styles", choices=("classic", "varied"), default="classic",
+                        help="the held-out buildings' element styles: varied holds out styles the model never saw")
     args = parser.parse_args(argv)
-    res = evaluate(args.model, args.seeds, args.area, args.stores, args.tight_gt)
+    res = evaluate(args.model, args.seeds, args.area, args.stores, args.tight_gt, args.styles)
     seconds = res.pop("seconds")
     print(format_ap_table([ev.to_json() for ev in res.values()], list(res)))
     print(f"{seconds:.0f} s")

@@ -76,6 +76,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(--hard registration,glass; name=level for a level 0-2); see "
                              "engine.synth.hard.hardness: registration, glass, unscanned, hidden_walls, wing, oblique, "
                              "bottlenecks, open_plan, walls, clutter, stairs, artefacts")
+    parser.add_argument("--styles", choices=("classic", "varied"), default="classic",
+                        help="classic: the training buildings' element styles (default); varied: each element "
+                             "drawn from its style family (boards bare or with a tray); the plan stays the same")
     parser.add_argument("--part-points", type=int, metavar="N",
                         help="largest estimated point count of one task; bigger spaces are cut into pieces "
                              "(default: buildingparser.synth.part-points)")
@@ -101,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         r = generate(args.out, seed=args.seed, area_m2=args.area_m2, rooms=args.rooms, floors=args.floors,
                      density=args.density, yaw=args.yaw, offset=tuple(args.offset), format=fmt, png=args.png,
                      client=client, overwrite=args.overwrite, part_points=args.part_points,
-                     storage_options=args.storage_options, hardness=args.hard)
+                     storage_options=args.storage_options, hardness=args.hard, styles=args.styles)
     print(f"generated {r['points']:,} points of {r['spaces']} spaces and {r['elements']:,} elements "
           f"({r['floor_area_m2']:,.0f} m2 of floor) into {r['out']} ({r['format']}): "
           f"{r['seconds']:.1f} s, {r['points_per_second']:,.0f} points/s")

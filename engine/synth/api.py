@@ -15,7 +15,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
              density: float | None = None, yaw: float = 0.0, offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
              format: str = "store", png: str | None = None, client=None, overwrite: bool = False,
              part_points: int | None = None, storage_options: dict[str, Any] | None = None,
-             hardness=None) -> dict[str, Any]:
+             hardness=None, styles: str = "classic") -> dict[str, Any]:
     """Generate a synthetic building scan with exact ground truth.
 
     Parameters
@@ -37,6 +37,9 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         Difficulties of real scans (:mod:`engine.synth.hard.hardness`): ``"all"``,
         ``"registration,glass"``, a list of names, ``{name: level}`` or a
         :class:`~engine.synth.hard.hardness.Hardness`; None: a clean building.
+    styles
+        ``"classic"`` or ``"varied"`` (elements drawn from their style families; see
+        :func:`engine.synth.plan.plan_building`).
 
     Returns
     -------
@@ -52,7 +55,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         check_reachable(client, str(out))
     t0 = time.perf_counter()
     building = plan_building(seed, area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,
-                             offset=offset, part_points=part_points, hardness=hardness)
+                             offset=offset, part_points=part_points, hardness=hardness, styles=styles)
     if format == "store":
         _, counts = write_store(building, str(out), client=client, overwrite=overwrite,
                                 storage_options=storage_options)

@@ -23,7 +23,7 @@ import shapely
 from engine.synth import colours as C
 from engine.synth.building import Opening, Space, Wall
 from engine.synth.hard import furniture as hard_furniture
-from engine.synth.pieces import board, bookcase, chair, clutter, sofa, table
+from engine.synth.pieces import bare_board, board, bookcase, chair, clutter, sofa, table
 from engine.synth.placer import Placer
 
 
@@ -101,7 +101,23 @@ def _board(p: Placer, width=(1.2, 2.4), edge=None) -> None:
     w, h = rng.uniform(*width), rng.uniform(0.9, 1.2)
     bottom = rng.uniform(0.85, 1.0)
     rgb = C.pick(rng, C.BOARDS)
-    p.against_wall("board", lambda: board(rng, w, h, bottom, rgb), w, 0.1, h, bottom=bottom, gap=0.0, edge=edge)
+    thickness = _bare_board(p)
+    if thickness is None:
+        p.against_wall("board", lambda: board(rng, w, h, bottom, rgb), w, 0.1, h, bottom=bottom, gap=0.0, edge=edge)
+    else:
+        p.against_wall("board", lambda: bare_board(w, h, bottom, rgb, thickness), w, thickness, h, bottom=bottom,
+                       gap=0.0, edge=edge)
+
+
+def _bare_board(p: Placer) -> float | None:
+    """A board's style family in a ``varied`` building: None for the classic board with its pen tray (half of
+    them), else the thickness of a bare board (1-4 cm), from the room's own variety stream; always None in a
+    classic building (no draw at all: its other draws stay as they were)."""
+    if "variety" not in p.style:
+        return None
+    k = sum(e.cls == "board" for e in p.space.elements)  # this room's boards placed so far
+    r = np.random.default_rng([p.style["variety"], int(p.space.id), k])
+    return float(r.uniform(0.01, 0.04)) if r.random() < 0.5 else None
 
 
 def _floor_clutter(p: Placer, n: int, kinds=("box", "plant", "bin", "printer")) -> None:

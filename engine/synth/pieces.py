@@ -100,6 +100,11 @@ def board(rng: np.random.Generator, w: float, h: float, bottom: float, rgb: tupl
             (0, 0.05 - 0.04, bottom - 0.01, 0.6 * w, 0.06, 0.02, C.METAL)]
 
 
+def bare_board(w: float, h: float, bottom: float, rgb: tuple, thickness: float) -> list[Part]:
+    """A bare board ``thickness`` thick on a wall, without a tray (``styles="varied"``)."""
+    return [(0, 0.0, bottom + h / 2, w, thickness, h, rgb)]
+
+
 def clutter(rng: np.random.Generator, kind: str, z: float = 0.0) -> tuple[list[Part], tuple[float, float]]:
     """A clutter object standing at height ``z``; also its footprint (w, d)."""
     rgb = C.vivid(rng)

@@ -37,7 +37,7 @@ from engine.synth.openings import place_doors, place_windows
 from engine.synth.parts import plan_parts
 from engine.synth.rooms import ensure_wc, new_space
 from engine.synth.scanners import place_scanners
-from engine.synth.streams import S_BUILDING, S_FLOOR, S_SPACE, rng_for
+from engine.synth.streams import S_BUILDING, S_FLOOR, S_SPACE, S_VARIETY, STYLES, rng_for
 from engine.synth.walls import grid_walls, thickness_draw
 from tiles.errors import UserError
 
@@ -78,7 +78,7 @@ def check_parameters(*, area_m2: float | None = None, rooms: int | None = None, 
 def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | None = None, floors: int = 1,
                   density: float | None = None, yaw: float = 0.0,
                   offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                  part_points: int | None = None, hardness=None) -> Building:
+                  part_points: int | None = None, hardness=None, styles: str = "classic") -> Building:
     """Plan a building: spaces with footprints, walls with openings, elements with boxes.
 
     Parameters
@@ -106,7 +106,13 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         The difficulties of real scans to add (:mod:`engine.synth.hard.hardness`): a
         :class:`~engine.synth.hard.hardness.Hardness`, ``"all"``, ``"glass,wing"``, a
         list of names or ``{name: level}``; None: a clean building.
+    styles
+        ``"classic"`` (the training buildings' styles) or ``"varied"``: each element drawn from its style family
+        (boards: with a pen tray or bare, 1-4 cm), from streams of its own: the plan is the classic building's,
+        and so is the furniture of every room without a new style (:data:`engine.synth.streams.STYLES`).
     """
+    if styles not in STYLES:
+        raise UserError(None, f"styles must be one of {', '.join(STYLES)}, not {styles!r}")
     area_m2, density = check_parameters(area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,
                                         offset=offset, hardness=hardness)
     h = Hardness.parse(hardness)
@@ -120,6 +126,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     frame = Frame(math.radians(float(yaw)), tuple(float(v) for v in offset))
 
     pl = _start_plan(int(seed), h, floors, area_m2, rooms, area_given)
+    if styles == "varied":
+        pl.style["variety"] = int(rng_for(int(seed), S_VARIETY).integers(2 ** 31))
     z = 0.0
     for f in range(floors):
         z = _plan_floor(pl, f, z, top=(f == floors - 1))
@@ -130,6 +138,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
               "part_points": part_points, "generator": "engine.synth"}
     if h:
         params["hardness"] = h.to_dict()
+    if styles != "classic":
+        params["styles"] = styles
     b = Building(int(seed), frame, density, pl.spaces, pl.walls, pl.openings, pl.floor_infos, params=params)
     b.parts = plan_parts(b, part_points)
     return b

@@ -10,6 +10,11 @@ import numpy as np
 
 #: Random-stream keys (first element of every spawn_key).
 S_BUILDING, S_FLOOR, S_SPACE, S_SCAN = 0, 1, 2, 3
+#: The style variety's own streams (``styles="varied"``): a classic building's draws stay as they are.
+S_VARIETY = 4
+#: The style families: ``classic`` (the shipped model's training buildings) and ``varied`` (each element's style
+#: drawn from its family: :mod:`engine.synth.furniture`).
+STYLES = ("classic", "varied")
 
 #: Average floor area per space, used to turn ``rooms`` into an area.
 AREA_PER_SPACE = 31.0

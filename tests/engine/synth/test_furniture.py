@@ -64,3 +64,33 @@ def test_room_types_hold_their_furniture():
     assert kinds["openspace"]["table"] >= 4
     assert kinds["lobby"]["sofa"] >= 1
     assert all(isinstance(p, Box) for s in b.spaces for e in s.elements if e.cls in FURNITURE for p in e.prims)
+
+
+def _boxes(b):
+    """Per space, its elements' classes and boxes."""
+    return {s.id: sorted((e.cls, tuple(np.round(e.center, 9)), tuple(np.round(e.size, 9))) for e in s.elements)
+            for s in b.spaces}
+
+
+def test_varied_styles_change_the_boards_only_and_hold_their_points(helpers):
+    from engine.synth import scan_building
+
+    classic, varied = (plan_building(13, area_m2=300, density=150, styles=s) for s in ("classic", "varied"))
+    assert _boxes(classic) == _boxes(plan_building(13, area_m2=300, density=150))  # classic is the default
+    assert "styles" not in classic.params and varied.params["styles"] == "varied"
+    boards = [e for s in varied.spaces for e in s.elements if e.cls == "board"]
+    # the same plan; a room's furniture moves only where a bare board left it room
+    assert [s.footprint.tolist() for s in varied.spaces] == [s.footprint.tolist() for s in classic.spaces]
+    bare = {e.space for e in boards if min(e.size[:2]) < 0.07}
+    a, b = _boxes(classic), _boxes(varied)
+    assert bare and all(a[k] == b[k] for k in a if k not in bare)
+    depths = sorted(min(e.size[:2]) for e in boards)
+    # both families: bare (1-4 cm, and the boxes' noise bound) and with a tray (0.1 m placement box)
+    assert len(boards) >= 2 and depths[0] < 0.07 < depths[-1]
+    scan = scan_building(varied)
+    P = helpers.xyz(scan)
+    doc = {e["id"]: e for e in varied.ground_truth()["elements"]}
+    for e in boards:
+        sel = scan["gt_instance"] == e.id
+        assert sel.any() and helpers.in_box(P[sel], doc[e.id], grow=1e-6).all()
+        assert np.all(scan["gt_class"][sel] == doc[e.id]["class_code"])
