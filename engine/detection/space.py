@@ -17,11 +17,11 @@ from engine.detection import moments as mom
 from engine.detection.candidates import class_windows, window_candidates
 from engine.detection.canonical import CanonicalFrame, estimate_frame
 from engine.detection.model import Model
+from engine.detection.planar import fit_planar
 from engine.detection.pointindex import PointIndex
 from engine.detection.proposals import Proposal
 from engine.detection.reveal import refine_reveals
 from engine.detection.settings import DetectionSettings
-from engine.detection.planar import fit_planar
 from engine.detection.surfaces import refine_surfaces
 from engine.detection.volume import SpaceVolume
 from engine.spaces.points import SpacePoints
