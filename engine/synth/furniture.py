@@ -103,10 +103,12 @@ def _board(p: Placer, width=(1.2, 2.4), edge=None) -> None:
     rgb = C.pick(rng, C.BOARDS)
     thickness = _bare_board(p)
     if thickness is None:
-        p.against_wall("board", lambda: board(rng, w, h, bottom, rgb), w, 0.1, h, bottom=bottom, gap=0.0, edge=edge)
+        info = {"style": "tray"} if "variety" in p.style else None  # (a classic building's records stay as they were)
+        p.against_wall("board", lambda: board(rng, w, h, bottom, rgb), w, 0.1, h, bottom=bottom, gap=0.0, edge=edge,
+                       info=info)
     else:
         p.against_wall("board", lambda: bare_board(w, h, bottom, rgb, thickness), w, thickness, h, bottom=bottom,
-                       gap=0.0, edge=edge)
+                       gap=0.0, edge=edge, info={"style": "bare", "thickness": round(thickness, 4)})
 
 
 def _bare_board(p: Placer) -> float | None:

@@ -108,8 +108,9 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         list of names or ``{name: level}``; None: a clean building.
     styles
         ``"classic"`` (the training buildings' styles) or ``"varied"``: each element drawn from its style family
-        (boards: with a pen tray or bare, 1-4 cm), from streams of its own: the plan is the classic building's,
-        and so is the furniture of every room without a new style (:data:`engine.synth.streams.STYLES`).
+        (boards: with a pen tray or bare, 1-4 cm; rooms: saturated walls, dark rooms, scan noise 1-10 mm, a
+        density factor x0.25-x4), from streams of its own: the plan is the classic building's, and so is the
+        furniture of every room without a new style (:data:`engine.synth.streams.STYLES`).
     """
     if styles not in STYLES:
         raise UserError(None, f"styles must be one of {', '.join(STYLES)}, not {styles!r}")
