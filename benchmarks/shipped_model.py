@@ -36,25 +36,35 @@ import numpy as np
 
 def tight_boxes(store, elements: list[dict]) -> list[dict]:
     """The elements with ``center`` and ``size`` of the tightest box of their points (``gt_instance``) at their
-    yaw; an element without points keeps its box.  Reads the whole store: for held-out buildings."""
-    from engine.synth.geometry import oriented_bounds
-    from tiles.export import gather_points
-
-    pts = gather_points(store, ["x", "y", "z", "gt_instance"])
-    m = store.meta
-    xyz = np.column_stack([pts[a] * m.scale[i] + m.offset[i] for i, a in enumerate("xyz")])
-    inst = pts["gt_instance"]
-    order = np.argsort(inst, kind="stable")
-    ids, starts = np.unique(inst[order], return_index=True)
-    bounds = dict(zip(ids.tolist(), np.split(order, starts[1:])))
+    yaw; an element without points keeps its box.  One tile at a time: each tile's points, turned into their
+    element's frame, give per-element minima and maxima, reduced over the tiles."""
+    ids = np.array([int(e["id"]) for e in elements], dtype=np.int64)
+    if not len(ids):
+        return []
+    row = np.full(int(ids.max()) + 1, -1, dtype=np.int64)
+    row[ids] = np.arange(len(ids))
+    yaw = np.array([float(e["yaw"]) for e in elements])
+    cos, sin = np.cos(yaw), np.sin(yaw)
+    lo, hi = np.full((len(ids), 3), np.inf), np.full((len(ids), 3), -np.inf)
+    for t in store.tiles:
+        xyz = store.xyz(t, local=False)
+        inst = store.read(t, ["gt_instance"])["gt_instance"].astype(np.int64)
+        ok = (inst >= 0) & (inst < len(row))
+        r = np.where(ok, row[np.clip(inst, 0, len(row) - 1)], -1)
+        keep = r >= 0
+        r, p = r[keep], xyz[keep]
+        local = np.column_stack([cos[r] * p[:, 0] + sin[r] * p[:, 1], -sin[r] * p[:, 0] + cos[r] * p[:, 1], p[:, 2]])
+        for a in range(3):
+            np.minimum.at(lo[:, a], r, local[:, a])
+            np.maximum.at(hi[:, a], r, local[:, a])
     out = []
-    for e in elements:
-        rows = bounds.get(int(e["id"]))
-        if rows is None or len(rows) == 0:
+    for i, e in enumerate(elements):
+        if not np.isfinite(lo[i, 0]):
             out.append(e)
             continue
-        center, size = oriented_bounds(xyz[rows], float(e["yaw"]))
-        out.append(dict(e, center=[float(v) for v in center], size=[float(v) for v in size]))
+        mid = (lo[i] + hi[i]) / 2
+        center = [cos[i] * mid[0] - sin[i] * mid[1], sin[i] * mid[0] + cos[i] * mid[1], mid[2]]
+        out.append(dict(e, center=[float(v) for v in center], size=[float(v) for v in hi[i] - lo[i]]))
     return out
 
 

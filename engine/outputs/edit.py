@@ -281,9 +281,10 @@ def edit_run(run: str, out: str, *, merge: Sequence[int] | None = None, split: i
         # the same edit on the COPC octree: same nodes, their points edited (never a stale copy left beside)
         copc = rewrite_copc(os.path.join(run, "points.copc.laz"), os.path.join(staging, "points.copc.laz"),
                             lambda points: edit_points(points, record))
-        if copc["points_out"] != record["points_out"]:
-            raise RuntimeError(f"{run}: points.copc.laz holds {copc['points_in']:,} points, points.laz "
-                               f"{record['points_in']:,}: the two files are not of one run")
+        if (copc["points_in"], copc["points_out"]) != (record["points_in"], record["points_out"]):
+            raise RuntimeError(f"{run}: points.copc.laz gives {copc['points_in']:,} -> {copc['points_out']:,} "
+                               f"points, points.laz {record['points_in']:,} -> {record['points_out']:,}: the two "
+                               "files are not of one run")
     layer, stats = layer_with_figures(layer, elements, layer.get("crs_wkt"))
     with open(os.path.join(staging, "spaces.geojson"), "w") as f:
         json.dump(layer, f)

@@ -32,3 +32,33 @@ def test_the_foreign_buildings_classes_are_all_known():
         want = {e["class"] for e in doc["elements"] if not e.get("difficult") and e["class"] != "clutter"}
         got = {ELEMENT_CLASSES[g["class_code"]] for g in foreign_ground_truth(str(gt.parent))}
         assert got == want and "board" in got
+
+
+def test_tight_boxes_are_the_tightest_boxes_of_each_elements_points(tmp_path):
+    import numpy as np
+
+    from benchmarks.shipped_model import tight_boxes
+    from engine.synth import generate
+    from tiles.store import open_store
+
+    generate(str(tmp_path / "b.zarr"), seed=3, rooms=2, density=80)
+    st = open_store(str(tmp_path / "b.zarr"))
+    elements = st.doc("ground_truth")["elements"]
+    tight = {e["id"]: e for e in tight_boxes(st, elements)}
+    xyz = np.concatenate([st.xyz(t, local=False) for t in st.tiles])
+    inst = np.concatenate([st.read(t, ["gt_instance"])["gt_instance"] for t in st.tiles])
+    checked = 0
+    for e in elements:
+        p = xyz[inst == e["id"]]
+        if len(p) < 2:
+            continue
+        t = tight[e["id"]]
+        c, s = np.cos(t["yaw"]), np.sin(t["yaw"])
+        q = p - np.asarray(t["center"])
+        local = np.column_stack([c * q[:, 0] + s * q[:, 1], -s * q[:, 0] + c * q[:, 1], q[:, 2]])
+        half = np.asarray(t["size"]) / 2
+        assert np.all(np.abs(local) <= half + 1e-9)  # holds every point
+        np.testing.assert_allclose(np.abs(local).max(axis=0), half, atol=1e-9)  # and touches them on every axis
+        assert np.all(np.asarray(t["size"]) <= np.asarray(e["size"]) + 1e-9)  # never larger than the generator's
+        checked += 1
+    assert checked > 20
