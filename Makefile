@@ -41,18 +41,22 @@ bench-quick: $(STAMP)
 # Then the colour-free model (engine/models/nocolour, chosen by run for clouds without colour) from the same
 # buildings and seeds with --no-colour: the colour feature groups are off, so nothing in it reads a point's colour
 # (about 50 min more; docs/model.md)
+# Training detects its own buildings (validations, box regression, re-ranking, CRF) with the detection settings
+# the shipped models were made with (their JSON's "detection"); run-time detection has since become faster
+# (max-stride 0.3 and feature-points, docs/experiments/speed.md), which would change what training learns.
 MODEL_DATA := build/model-data
 MODEL_SEEDS := 1100 1101 1102 1103 1104 1105
+MODEL_ENV := DASK_BUILDINGPARSER__DETECTION__MAX_STRIDE=0.2 DASK_BUILDINGPARSER__DETECTION__FEATURE_POINTS=0
 model: $(STAMP)
 	rm -rf $(MODEL_DATA)
 	for s in $(MODEL_SEEDS); do \
 	  $(BIN)/buildingparser synth $(MODEL_DATA)/b$$s.zarr --seed $$s --area-m2 250 --training-yaw || exit 1; done
-	$(BIN)/buildingparser train $(foreach s,$(MODEL_SEEDS),$(MODEL_DATA)/b$(s).zarr) \
+	$(MODEL_ENV) $(BIN)/buildingparser train $(foreach s,$(MODEL_SEEDS),$(MODEL_DATA)/b$(s).zarr) \
 	  --synthetic 20 --seed 1000 --area 80 --rounds 2 --model engine/models/default
-	$(BIN)/buildingparser train-crf engine/models/default --synthetic 2 --seed 5000 --area 120
-	$(BIN)/buildingparser train $(foreach s,$(MODEL_SEEDS),$(MODEL_DATA)/b$(s).zarr) \
+	$(MODEL_ENV) $(BIN)/buildingparser train-crf engine/models/default --synthetic 2 --seed 5000 --area 120
+	$(MODEL_ENV) $(BIN)/buildingparser train $(foreach s,$(MODEL_SEEDS),$(MODEL_DATA)/b$(s).zarr) \
 	  --synthetic 20 --seed 1000 --area 80 --rounds 2 --no-colour --model engine/models/nocolour
-	$(BIN)/buildingparser train-crf engine/models/nocolour --synthetic 2 --seed 5000 --area 120
+	$(MODEL_ENV) $(BIN)/buildingparser train-crf engine/models/nocolour --synthetic 2 --seed 5000 --area 120
 	rm -rf $(MODEL_DATA)
 
 clean:

@@ -40,7 +40,7 @@ def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSetting
     for shape, members in groups.items():
         w, b = model.window_weights(members)
         scored = score_windows_many(vol, np.array(shape), w, b, model.layout, settings.stride,
-                                    settings.min_window_points, settings.max_stride)
+                                    settings.min_window_points, settings.max_stride, floor=settings.score_threshold)
         for ai, ws in zip(members, scored):
             top = top_windows(ws, ai, settings)
             if top is not None:

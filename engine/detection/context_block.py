@@ -64,17 +64,52 @@ def context_features(window: np.ndarray, slabs: np.ndarray) -> np.ndarray:
     return out
 
 
-def window_context(iv: np.ndarray, grid: mom.VoxelGrid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """The context block ``(n, 15)`` of windows ``[lo, hi)`` (voxel indices ``(n, 3)``); ``iv`` all channels."""
+def context_sums(iv: np.ndarray, grid: mom.VoxelGrid, lo: np.ndarray, hi: np.ndarray,
+                 channels: tuple[int, ...] | None = CONTEXT_CHANNELS) -> tuple[np.ndarray, np.ndarray]:
+    """Sums ``(n, 4)`` of windows ``[lo, hi)`` and ``(n, 6, 4)`` of their slabs (x-, x+, y-, y+, z-, z+).
+
+    ``iv`` holds all moment channels (``channels`` picks :data:`CONTEXT_CHANNELS`), or only those (``channels``
+    None: :attr:`engine.detection.volume.SpaceVolume.context_iv`).
+    """
     shape = np.asarray(grid.shape)
     g = context_margin(grid.voxel)
-    ch = list(CONTEXT_CHANNELS)
-    window = mom.box_sums(iv, lo, hi)[..., ch]
+    pick = (lambda s: s) if channels is None else (lambda s: s[..., list(channels)])  # noqa: E731
+    window = pick(mom.box_sums(iv, lo, hi))
     slabs = []
     for a in range(3):
         for side in (-1, 1):
             slo, shi = lo.copy(), hi.copy()
             cut = slab_interval(np.stack([lo[:, a], hi[:, a]], axis=1), side, int(g[a]), int(shape[a]))
             slo[:, a], shi[:, a] = cut[:, 0], cut[:, 1]
-            slabs.append(mom.box_sums(iv, slo, shi)[..., ch])
-    return context_features(window, np.stack(slabs, axis=-2))
+            slabs.append(pick(mom.box_sums(iv, slo, shi)))
+    return window, np.stack(slabs, axis=-2)
+
+
+def window_context(iv: np.ndarray, grid: mom.VoxelGrid, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The context block ``(n, 15)`` of windows ``[lo, hi)`` (voxel indices ``(n, 3)``); ``iv`` all channels."""
+    return context_features(*context_sums(iv, grid, lo, hi))
+
+
+def context_bounds(civ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds ``(15,)`` of each context feature of any window of a space.
+
+    ``civ`` is the space's integral volume of :data:`CONTEXT_CHANNELS`.  Windows and slabs are
+    unions of voxels, so a mean colour (or luminance) lies between the least and the greatest of
+    the occupied voxels' means: the shares are in [0, 1], a luminance contrast within the
+    voxels' luminance span ``s`` (``[-s, s]``, its magnitude ``[0, s]``), a channel's contrast within
+    that channel's span.
+    """
+    sums = np.diff(np.diff(np.diff(civ, axis=0), axis=1), axis=2).reshape(-1, civ.shape[-1])
+    sums = sums[sums[:, 0] > 0.5]
+    if len(sums):
+        means = sums[:, 1:] / sums[:, :1]
+        lum = means.mean(axis=1)
+        channel = means.max(axis=0) - means.min(axis=0)
+        lum_span = float(lum.max() - lum.min())
+    else:
+        channel, lum_span = np.zeros(3), 0.0
+    pad = lambda v: v * (1.0 + 1e-9) + 1e-9  # noqa: E731  (the integral volume's rounding)
+    channel, lum_span = pad(channel), pad(lum_span)
+    lo = np.concatenate([np.zeros(6), np.full(3, -lum_span), np.zeros(3), -channel])
+    hi = np.concatenate([np.ones(6), np.full(6, lum_span), channel])
+    return lo, hi

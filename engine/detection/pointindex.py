@@ -21,16 +21,20 @@ class PointIndex:
         self.points = metric[mom.voxel_order(flat, n_cells)]
         self.offsets = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=n_cells))])
 
-    def points_in_metric(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Canonical points of the voxels that the metric box ``[lo, hi]`` touches (a superset of its points)."""
+    def points_in_metric(self, lo: np.ndarray, hi: np.ndarray, at_most: int | None = None) -> np.ndarray:
+        """Canonical points of the voxels that the metric box ``[lo, hi]`` touches (a superset of its points).
+
+        ``at_most``: of more points than that, every ``ceil(n / at_most)``-th in voxel order (an even,
+        deterministic subsample, for statistics that are shares and quantiles of the points).
+        """
         vox = np.asarray(self.grid.voxel, dtype=np.float64)
         n = np.asarray(self.grid.shape)
         vlo = np.clip(np.floor(np.asarray(lo) / vox).astype(np.int64), 0, n - 1)
         vhi = np.clip(np.ceil(np.asarray(hi) / vox).astype(np.int64), vlo + 1, n)
-        return self.points_in(vlo, vhi)
+        return self.points_in(vlo, vhi, at_most)
 
-    def points_in(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Canonical points ``(m, 3)`` of the voxel box ``[lo, hi)``."""
+    def points_in(self, lo: np.ndarray, hi: np.ndarray, at_most: int | None = None) -> np.ndarray:
+        """Canonical points ``(m, 3)`` of the voxel box ``[lo, hi)`` (``at_most``: as :meth:`points_in_metric`)."""
         nx, ny, nz = self.grid.shape
         xs, ys = np.meshgrid(np.arange(lo[0], hi[0]), np.arange(lo[1], hi[1]), indexing="ij")
         col = (xs.ravel() * ny + ys.ravel()) * nz
@@ -39,5 +43,10 @@ class PointIndex:
         total = int(lengths.sum())
         if total == 0:
             return np.zeros((0, 3))
-        base = np.repeat(start - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
-        return self.points[base + np.arange(total)]
+        first = np.cumsum(lengths) - lengths  # the rank of each run's first point among the box's points
+        if at_most is not None and total > at_most:
+            # every step-th of the box's points, found by rank before any is gathered
+            rank = np.arange(0, total, -(-total // int(at_most)))
+            run = np.searchsorted(first, rank, side="right") - 1
+            return self.points[start[run] + (rank - first[run])]
+        return self.points[np.repeat(start - first, lengths) + np.arange(total)]

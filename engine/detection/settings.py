@@ -19,7 +19,7 @@ class DetectionSettings:
     """Run-time settings of the detector (see ``engine/detection/detection.yaml``)."""
 
     stride: float = 0.25
-    max_stride: float = 0.2
+    max_stride: float = 0.3
     min_window_points: int = 10
     score_threshold: float = -0.75
     pre_nms: int = 300
@@ -40,6 +40,7 @@ class DetectionSettings:
     planar_depth: float = 0.15
     planar_beside: float = 0.3
     planar_quantile: float = 0.005
+    feature_points: int = 50_000
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -54,6 +55,8 @@ class DetectionSettings:
             raise ValueError(f"surface-choice must be one of {', '.join(SURFACE_CHOICES)}, got {self.surface_choice!r}")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
+        if self.feature_points < 0:
+            raise ValueError(f"feature-points must be >= 0 (0: every point), got {self.feature_points}")
         if self.planar_depth <= 0 or self.planar_beside <= 0 or not 0 <= self.planar_quantile < 0.5:
             raise ValueError("planar-depth and planar-beside must be > 0, planar-quantile in [0, 0.5)")
         for name in ("one_per_space", "refine_classes", "planar_classes"):

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.detection import moments as mom
-from engine.detection.context_block import context_features, context_margin, slab_interval
+from engine.detection.context_block import context_features, context_margin, context_sums, slab_interval
 from engine.detection.global_block import global_scores
 from engine.detection.layout import FeatureLayout
 from engine.detection.local_block import LOCAL_SIZE, local_features, sub_bounds
@@ -176,13 +176,19 @@ def score_windows(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias
 
 def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray, bias: np.ndarray,
                        layout: FeatureLayout, stride: float, min_points: int = 10,
-                       max_stride: float | None = None) -> list[WindowScores]:
+                       max_stride: float | None = None, floor: float | None = None) -> list[WindowScores]:
     """:func:`score_windows` of one window shape for several linear models ``(m, F)`` at once.
 
     The features of the windows (the box sums and local features of their
     sub-boxes, most of the cost) are computed once for all ``m`` weight vectors:
     for the atoms of a dictionary whose windows have the same voxel shape in a
     space (the same or different classes).  ``bias`` is ``(m,)``.
+
+    ``floor``: only scores above it are wanted.  The context block is then computed only at
+    the positions where some model's score without it, plus the most its context block can add
+    in this space (:attr:`engine.detection.volume.SpaceVolume.context_range`), exceeds ``floor``;
+    elsewhere the score is ``-inf`` (it could not exceed ``floor``).  Scores above ``floor`` are
+    the same as without it.
     """
     k = layout.k
     k3 = k ** 3
@@ -235,12 +241,35 @@ def score_windows_many(vol: SpaceVolume, shape: np.ndarray, weights: np.ndarray,
         part = local_features(sums, np.ones(len(sums)), k, layout.min_points)
         part[:, 1] = sums[:, 0]  # raw count: ratio = count / window count
         acc[:, sl] += _slot_sums((len(xs), len(uy), len(uz)), occ, part, (sub_ix, iy, iz), w2, k)
-    if layout.context and np.any(w[:, layout.local_end:]):
-        acc[:m] += _context_scores(vol, (win(px, shape[0]), win(py, shape[1]), win(pz, shape[2])),
-                                   w[:, layout.local_end:])
     n_win = np.maximum(counts, 1.0)
-    return [WindowScores(shape, px, py, pz, np.where(valid, acc[j] + acc[m + j] / n_win * k3, -np.inf),
-                         counts) for j in range(m)]
+    score = np.where(valid, acc[:m] + acc[m:] / n_win * k3, -np.inf)
+    wc = w[:, layout.local_end:]
+    if layout.context and np.any(wc):
+        if floor is None:
+            score += _context_scores(vol, (win(px, shape[0]), win(py, shape[1]), win(pz, shape[2])), wc)
+        else:
+            _add_context_above(score, vol, (px, py, pz), shape, wc, floor)
+    return [WindowScores(shape, px, py, pz, score[j], counts) for j in range(m)]
+
+
+def _add_context_above(score: np.ndarray, vol: SpaceVolume, starts: tuple[np.ndarray, np.ndarray, np.ndarray],
+                       shape: np.ndarray, weights: np.ndarray, floor: float) -> None:
+    """Add in place the context block's share to the scores ``(m, nx, ny, nz)`` of the positions where it may
+    lift some model above ``floor``; set the others to ``-inf`` (see :func:`score_windows_many`)."""
+    lo_f, hi_f = vol.context_range
+    most = np.maximum(weights * lo_f, weights * hi_f).sum(axis=1)  # (m,)
+    flat = score.reshape(len(weights), -1)
+    need = np.nonzero((flat + most[:, None] > floor).any(axis=0))[0]
+    rest = np.ones(flat.shape[1], dtype=bool)
+    rest[need] = False
+    flat[:, rest] = -np.inf
+    dims = score.shape[1:]
+    for s in range(0, len(need), SUBBOX_BATCH):
+        at = need[s:s + SUBBOX_BATCH]
+        i, j, k = np.unravel_index(at, dims)
+        lo = np.stack([starts[0][i], starts[1][j], starts[2][k]], axis=-1)
+        feats = context_features(*context_sums(vol.context_iv, vol.grid, lo, lo + shape, channels=None))
+        flat[:, at] += weights @ feats.T
 
 
 def _context_scores(vol: SpaceVolume, wins: tuple[np.ndarray, np.ndarray, np.ndarray],

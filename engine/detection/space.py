@@ -86,12 +86,14 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     vox = grid.voxel
     lo_m, hi_m = lo * vox, hi * vox
     if settings.refine and index is not None:
+        at_most = settings.feature_points or None
+        sample = lambda lo, hi: index.points_in_metric(lo, hi, at_most)  # noqa: E731  (boxfit and rescore)
         refine_surfaces(lo, hi, lo_m, hi_m, cls_all, at_all_cat, model.dictionary.atoms_, grid, index, settings)
         refine_reveals(lo, hi, lo_m, hi_m, cls_all, grid, index)  # doors' depth, columns' sides
         if model.boxfit is not None and settings.box_fit:
-            model.boxfit.apply(lo_m, hi_m, cls_all, index.points_in_metric, np.asarray(vol.frame.extent, float))
+            model.boxfit.apply(lo_m, hi_m, cls_all, sample, np.asarray(vol.frame.extent, float))
     if settings.refine and index is not None and model.rescorer is not None and settings.rescore:
-        score = model.rescorer.apply(score, cls_all, lo_m, hi_m, index.points_in_metric,
+        score = model.rescorer.apply(score, cls_all, lo_m, hi_m, sample,
                                      np.asarray(vol.frame.extent, float))
     if settings.refine and index is not None and settings.planar_classes:
         # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)

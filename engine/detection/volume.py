@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.detection import moments as mom
 from engine.detection.colours import colour_factor
-from engine.detection.context_block import CONTEXT_CHANNELS
+from engine.detection.context_block import CONTEXT_CHANNELS, context_bounds
 
 
 @dataclass
@@ -29,6 +29,14 @@ class SpaceVolume:
     def context_iv(self) -> np.ndarray:
         """The integral volume of :data:`CONTEXT_CHANNELS` alone ``(nx+1, ny+1, nz+1, 4)``, contiguous (made once)."""
         return self._channels_iv("_context_iv", CONTEXT_CHANNELS)
+
+    @property
+    def context_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds ``(15,)`` of every window's context block in this space (:func:`context_bounds`; made once)."""
+        cached = self.__dict__.get("_context_range")
+        if cached is None or cached[0] is not self.iv:
+            cached = self.__dict__["_context_range"] = (self.iv, context_bounds(self.context_iv))
+        return cached[1]
 
     def _channels_iv(self, key: str, channels: tuple[int, ...]) -> np.ndarray:
         """A contiguous copy of some channels of ``iv``, cached under ``key`` until ``iv`` is replaced."""

@@ -65,3 +65,23 @@ def test_context_features_from_hand_made_sums():
     np.testing.assert_allclose(f[6:12], [0.3, 0.0, -0.4, 0.3, 0.0, 0.4])
     np.testing.assert_allclose(f[12:15], [0.5 - 15.0 / 40.0] * 3)
     assert np.all(context_features(np.zeros(4), slabs)[6:] == 0)  # an empty window has no contrast
+
+
+def test_context_bounds_hold_for_every_window():
+    """Each context feature of any window lies within :func:`context_bounds` of its space, and a space of one
+    colour has no contrast to bound."""
+    from engine.detection.context_block import context_bounds, window_context
+
+    rng = np.random.default_rng(3)
+    vol, _ = _wall_with_board(rng, board_rgb=(0.1, 0.9, 0.2))
+    lo_b, hi_b = vol.context_range
+    n = np.asarray(vol.grid.shape)
+    lo = rng.integers(0, n, (4000, 3))
+    hi = np.minimum(lo + rng.integers(1, 12, (4000, 3)), n)
+    ctx = window_context(vol.iv, vol.grid, lo, hi)
+    assert np.all(ctx >= lo_b - 1e-12) and np.all(ctx <= hi_b + 1e-12)
+    assert np.all(lo_b[6:9] < -0.1) and ctx[:, 6:9].min() < -0.05 and ctx[:, 6:9].max() > 0.05  # room to bound
+    grey, _ = _wall_with_board(rng, board_rgb=(0.8, 0.78, 0.74))  # the wall's colour
+    g_lo, g_hi = context_bounds(grey.context_iv)
+    assert np.all(np.abs(g_lo[6:]) < 1e-6) and np.all(np.abs(g_hi[6:]) < 1e-6)
+    assert np.array_equal(g_hi[:6], np.ones(6)) and np.array_equal(g_lo[:6], np.zeros(6))

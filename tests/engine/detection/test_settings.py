@@ -17,3 +17,10 @@ def test_one_per_space_and_refine_classes_settings():
         DetectionSettings(one_per_space=("stairs",))
     with pytest.raises(ValueError, match="surface-choice"):
         DetectionSettings(surface_choice="highest")
+
+
+def test_feature_points_setting():
+    assert DetectionSettings.from_config().feature_points == 50_000
+    assert DetectionSettings(feature_points=0).feature_points == 0  # every point
+    with pytest.raises(ValueError, match="feature-points"):
+        DetectionSettings(feature_points=-1)

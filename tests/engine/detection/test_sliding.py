@@ -117,3 +117,35 @@ def test_nms_keeps_best_of_overlapping_boxes():
     hi[3] = [2, 2, 2]
     keep = non_maximum_suppression(lo, hi, np.array([0.5, 0.9, 0.7, 0.1]), 0.3, 10)
     assert keep.tolist() == [1, 2, 3]
+
+
+def test_a_floor_scores_the_context_only_where_a_window_may_pass_it(monkeypatch):
+    """With ``floor``, the scores above it are those without it; every other position is at most the floor,
+    and the context block of many of them was never computed (their score is -inf)."""
+    monkeypatch.setattr(sliding, "SUBBOX_BATCH", 800)
+    rng = np.random.default_rng(5)
+    vol = _room(rng)
+    lay = FeatureLayout(k=4, min_points=2)
+    assert lay.context
+    w = rng.normal(size=(3, lay.size))
+    b = np.array([0.0, 0.5, -0.5])
+    shape = np.array([6, 5, 8])
+    full = score_windows_many(vol, shape, w, b, lay, stride=0.25, min_points=10, max_stride=0.2)
+    finite = np.concatenate([f.scores[np.isfinite(f.scores)] for f in full])
+    floor = float(np.quantile(finite, 0.8))
+    cut = score_windows_many(vol, shape, w, b, lay, stride=0.25, min_points=10, max_stride=0.2, floor=floor)
+    skipped = 0
+    for f, c in zip(full, cut):
+        above = f.scores > floor
+        assert above.sum() > 5
+        assert np.allclose(c.scores[above], f.scores[above], rtol=0, atol=1e-9)
+        assert np.all(c.scores[~above] <= floor)
+        skipped += int((np.isneginf(c.scores) & np.isfinite(f.scores)).sum())
+        assert np.array_equal(c.counts, f.counts)
+    assert skipped > 0
+    # the context block matters here: without it the scores above the floor are others
+    w0 = w.copy()
+    w0[:, lay.local_end:] = 0.0
+    bare = score_windows_many(vol, shape, w0, b, lay, stride=0.25, min_points=10, max_stride=0.2)
+    ok = full[0].scores > floor
+    assert not np.allclose(bare[0].scores[ok], full[0].scores[ok], atol=1e-3)

@@ -109,3 +109,36 @@ def test_a_models_rescorer_replaces_its_classes_scores(buildings, trained):
         assert c.score == a.score
         if a.class_code != wall:
             assert b.score == a.score
+
+
+def test_feature_points_subsamples_the_point_statistics_of_the_re_ranking(buildings, trained):
+    """``feature-points`` caps the points the re-ranking's statistics read around a box: far above any box's points
+    it changes nothing, a small cap changes the statistics (and so the scores) but never the boxes."""
+    import dataclasses
+
+    from engine.detection import rescore as rs
+    from engine.detection.boxfit import N_FEATURES as BOX_FEATURES
+    from engine.detection.space import detect_space
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    wall = CLASS_CODES["wall"]
+    coef = np.zeros((12, rs.N_FEATURES))
+    coef[wall, 1:1 + 3 * BOX_FEATURES] = 1.0  # walls: the sum of their point statistics
+    enabled = np.zeros(12, bool)
+    enabled[wall] = True
+    model = dataclasses.replace(trained, rescorer=rs.Rescorer(np.zeros((12, rs.N_FEATURES)),
+                                                              np.ones((12, rs.N_FEATURES)), coef, np.zeros(12),
+                                                              enabled))
+    every = detect_space(pts, model, DetectionSettings.from_config(feature_points=0))
+    capped_high = detect_space(pts, model, DetectionSettings.from_config(feature_points=len(pts.xyz)))
+    capped_low = detect_space(pts, model, DetectionSettings.from_config(feature_points=300))
+    assert [p.score for p in every] == [p.score for p in capped_high]
+    walls = [(a, b) for a, b in zip(every, capped_low) if a.class_code == wall]
+    assert len(walls) >= 2 and any(abs(a.score - b.score) > 1e-6 for a, b in walls)
+    for a, b in zip(every, capped_low):
+        np.testing.assert_allclose(b.world_size, a.world_size)
+        np.testing.assert_allclose(b.center, a.center)
