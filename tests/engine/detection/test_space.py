@@ -77,25 +77,14 @@ def test_a_models_rescorer_replaces_its_classes_scores(buildings, trained):
     """Detection gives the classes the model's learned re-ranking (engine.detection.rescore) is enabled for its log-odds
     as their score, from the features of their final boxes; other classes and ``rescore: false`` keep the
     detector's score, and the boxes do not move."""
-    import dataclasses
-
     from engine.detection import rescore as rs
     from engine.detection.space import detect_space
-    from engine.spaces.points import index_spaces, load_space
 
-    _, stores = buildings
-    store = stores["test"]
-    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
-    pts = load_space(store, ref, "gt_space")
     wall = CLASS_CODES["wall"]
-    coef = np.zeros((12, rs.N_FEATURES))
-    coef[wall, 0] = -1.0  # walls: the detector's score turned around
-    coef[wall, rs.N_FEATURES - 3] = 0.5  # ... plus half the log of the space's height (the same for every wall)
-    enabled = np.zeros(12, bool)
-    enabled[wall] = True
-    rescored = dataclasses.replace(trained, rescorer=rs.Rescorer(np.zeros((12, rs.N_FEATURES)),
-                                                                 np.ones((12, rs.N_FEATURES)), coef, np.full(12, 2.0),
-                                                                 enabled))
+    row = np.zeros(rs.N_FEATURES)
+    row[0] = -1.0  # walls: the detector's score turned around
+    row[rs.N_FEATURES - 3] = 0.5  # ... plus half the log of the space's height (the same for every wall)
+    pts, rescored = _largest_space_and_wall_rescorer(buildings, trained, row, 2.0)
     plain = detect_space(pts, trained, DetectionSettings.from_config())
     new = detect_space(pts, rescored, DetectionSettings.from_config())
     off = detect_space(pts, rescored, DetectionSettings.from_config(rescore=False))
@@ -114,25 +103,14 @@ def test_a_models_rescorer_replaces_its_classes_scores(buildings, trained):
 def test_feature_points_subsamples_the_point_statistics_of_the_re_ranking(buildings, trained):
     """``feature-points`` caps the points the re-ranking's statistics read around a box: far above any box's points
     it changes nothing, a small cap changes the statistics (and so the scores) but never the boxes."""
-    import dataclasses
-
     from engine.detection import rescore as rs
     from engine.detection.boxfit import N_FEATURES as BOX_FEATURES
     from engine.detection.space import detect_space
-    from engine.spaces.points import index_spaces, load_space
 
-    _, stores = buildings
-    store = stores["test"]
-    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
-    pts = load_space(store, ref, "gt_space")
     wall = CLASS_CODES["wall"]
-    coef = np.zeros((12, rs.N_FEATURES))
-    coef[wall, 1:1 + 3 * BOX_FEATURES] = 1.0  # walls: the sum of their point statistics
-    enabled = np.zeros(12, bool)
-    enabled[wall] = True
-    model = dataclasses.replace(trained, rescorer=rs.Rescorer(np.zeros((12, rs.N_FEATURES)),
-                                                              np.ones((12, rs.N_FEATURES)), coef, np.zeros(12),
-                                                              enabled))
+    row = np.zeros(rs.N_FEATURES)
+    row[1:1 + 3 * BOX_FEATURES] = 1.0  # walls: the sum of their point statistics
+    pts, model = _largest_space_and_wall_rescorer(buildings, trained, row, 0.0)
     every = detect_space(pts, model, DetectionSettings.from_config(feature_points=0))
     capped_high = detect_space(pts, model, DetectionSettings.from_config(feature_points=len(pts.xyz)))
     capped_low = detect_space(pts, model, DetectionSettings.from_config(feature_points=300))
@@ -142,3 +120,23 @@ def test_feature_points_subsamples_the_point_statistics_of_the_re_ranking(buildi
     for a, b in zip(every, capped_low):
         np.testing.assert_allclose(b.world_size, a.world_size)
         np.testing.assert_allclose(b.center, a.center)
+
+
+def _largest_space_and_wall_rescorer(buildings, trained, coef_row, bias: float):
+    """The test building's largest ground-truth space, and ``trained`` with a re-ranking for walls alone
+    (features unscaled, coefficients ``coef_row``, intercept ``bias``)."""
+    import dataclasses
+
+    from engine.detection import rescore as rs
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    coef = np.zeros((12, rs.N_FEATURES))
+    coef[CLASS_CODES["wall"]] = coef_row
+    enabled = np.zeros(12, bool)
+    enabled[CLASS_CODES["wall"]] = True
+    rescorer = rs.Rescorer(np.zeros((12, rs.N_FEATURES)), np.ones((12, rs.N_FEATURES)), coef, np.full(12, bias),
+                           enabled)
+    return load_space(store, ref, "gt_space"), dataclasses.replace(trained, rescorer=rescorer)
