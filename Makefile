@@ -42,8 +42,9 @@ bench-quick: $(STAMP)
 # buildings and seeds with --no-colour: the colour feature groups are off, so nothing in it reads a point's colour
 # (about 50 min more; docs/model.md)
 # Training detects its own buildings (validations, box regression, re-ranking, CRF) with the detection settings
-# the shipped models were made with (their JSON's "detection"); run-time detection has since become faster
-# (max-stride 0.3 and feature-points, docs/experiments/speed.md), which would change what training learns.
+# the shipped models were made with (their JSON's "detection"; every point for the box statistics): run-time
+# detection reads at most feature-points of them since (docs/experiments/speed.md), which would change what training
+# learns.
 MODEL_DATA := build/model-data
 MODEL_SEEDS := 1100 1101 1102 1103 1104 1105
 MODEL_ENV := DASK_BUILDINGPARSER__DETECTION__MAX_STRIDE=0.2 DASK_BUILDINGPARSER__DETECTION__FEATURE_POINTS=0

@@ -19,7 +19,7 @@ class DetectionSettings:
     """Run-time settings of the detector (see ``engine/detection/detection.yaml``)."""
 
     stride: float = 0.25
-    max_stride: float = 0.3
+    max_stride: float = 0.2
     min_window_points: int = 10
     score_threshold: float = -0.75
     pre_nms: int = 300
