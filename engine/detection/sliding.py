@@ -259,10 +259,9 @@ def _add_context_above(score: np.ndarray, vol: SpaceVolume, starts: tuple[np.nda
     lo_f, hi_f = vol.context_range
     most = np.maximum(weights * lo_f, weights * hi_f).sum(axis=1)  # (m,)
     flat = score.reshape(len(weights), -1)
-    need = np.nonzero((flat + most[:, None] > floor).any(axis=0))[0]
-    rest = np.ones(flat.shape[1], dtype=bool)
-    rest[need] = False
-    flat[:, rest] = -np.inf
+    may = (flat + most[:, None] > floor).any(axis=0)
+    flat[:, ~may] = -np.inf
+    need = np.flatnonzero(may)
     dims = score.shape[1:]
     for s in range(0, len(need), SUBBOX_BATCH):
         at = need[s:s + SUBBOX_BATCH]

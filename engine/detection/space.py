@@ -10,6 +10,7 @@ Design notes: ``docs/design/detection.md``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -85,9 +86,9 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     lo, hi, score, cls_all, at_all_cat = (np.concatenate(parts) for parts in zip(*per_class))
     vox = grid.voxel
     lo_m, hi_m = lo * vox, hi * vox
+    at_most = settings.feature_points or None
+    sample = None if index is None else partial(index.points_in_metric, at_most=at_most)  # box fit and re-ranking
     if settings.refine and index is not None:
-        at_most = settings.feature_points or None
-        sample = lambda lo, hi: index.points_in_metric(lo, hi, at_most)  # noqa: E731  (boxfit and rescore)
         refine_surfaces(lo, hi, lo_m, hi_m, cls_all, at_all_cat, model.dictionary.atoms_, grid, index, settings)
         refine_reveals(lo, hi, lo_m, hi_m, cls_all, grid, index)  # doors' depth, columns' sides
         if model.boxfit is not None and settings.box_fit:

@@ -1,6 +1,7 @@
 """A space ready for windows (:class:`SpaceVolume`): its canonical frame, voxel grid and integral volume of moments."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,16 +34,17 @@ class SpaceVolume:
     @property
     def context_range(self) -> tuple[np.ndarray, np.ndarray]:
         """Bounds ``(15,)`` of every window's context block in this space (:func:`context_bounds`; made once)."""
-        cached = self.__dict__.get("_context_range")
-        if cached is None or cached[0] is not self.iv:
-            cached = self.__dict__["_context_range"] = (self.iv, context_bounds(self.context_iv))
-        return cached[1]
+        return self._derived("_context_range", lambda: context_bounds(self.context_iv))
 
     def _channels_iv(self, key: str, channels: tuple[int, ...]) -> np.ndarray:
         """A contiguous copy of some channels of ``iv``, cached under ``key`` until ``iv`` is replaced."""
+        return self._derived(key, lambda: np.ascontiguousarray(self.iv[..., list(channels)]))
+
+    def _derived(self, key: str, make: Callable[[], Any]) -> Any:
+        """``make()``, cached under ``key`` until ``iv`` is replaced."""
         cached = self.__dict__.get(key)
         if cached is None or cached[0] is not self.iv:
-            cached = self.__dict__[key] = (self.iv, np.ascontiguousarray(self.iv[..., list(channels)]))
+            cached = self.__dict__[key] = (self.iv, make())
         return cached[1]
 
     @classmethod
