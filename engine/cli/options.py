@@ -20,6 +20,22 @@ def add_storage_options(parser: argparse.ArgumentParser) -> None:
                         help='fsspec options for URLs, e.g. \'{"endpoint_url": "http://127.0.0.1:9000"}\'')
 
 
+STYLES_HELP = ("classic (the shipped model's training buildings' styles; default) or a comma-separated combination "
+               "of style families: varied (boards bare or with a tray; saturated, dark, noisier, sparser and denser "
+               "rooms), subsampled (each room's scan voxel-subsampled on a 1-5 cm grid), windows (punched, ribbon, "
+               "full-height and tall windows, with or without mullions and sill); the plan of spaces stays the same")
+
+
+def styles(text: str) -> str:
+    """A ``--styles`` value, checked and in its canonical order (:func:`engine.synth.streams.style_families`)."""
+    from engine.synth.streams import style_families, style_name
+
+    try:
+        return style_name(style_families(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def json_dict(text: str) -> dict:
     try:
         value = json.loads(text)

@@ -42,7 +42,7 @@ examples:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    from engine.cli.options import add_cluster_options, add_storage_options
+    from engine.cli.options import STYLES_HELP, add_cluster_options, add_storage_options, styles
 
     parser.add_argument("out", metavar="OUT", help="tile store (path or URL), .las/.laz file, or S3DIS folder")
     parser.add_argument("--seed", type=int, default=0, metavar="N", help="random seed: same seed, same building "
@@ -76,9 +76,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "(--hard registration,glass; name=level for a level 0-2); see "
                              "engine.synth.hard.hardness: registration, glass, unscanned, hidden_walls, wing, oblique, "
                              "bottlenecks, open_plan, walls, clutter, stairs, artefacts")
-    parser.add_argument("--styles", choices=("classic", "varied"), default="classic",
-                        help="classic: the training buildings' element styles (default); varied: each element "
-                             "drawn from its style family (boards bare or with a tray); the plan stays the same")
+    parser.add_argument("--styles", type=styles, default="classic", metavar="STYLES", help=STYLES_HELP)
     parser.add_argument("--part-points", type=int, metavar="N",
                         help="largest estimated point count of one task; bigger spaces are cut into pieces "
                              "(default: buildingparser.synth.part-points)")

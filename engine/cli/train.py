@@ -40,7 +40,7 @@ examples:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    from engine.cli.options import add_cluster_options, add_storage_options
+    from engine.cli.options import STYLES_HELP, add_cluster_options, add_storage_options, styles
 
     parser.add_argument("data", nargs="*", metavar="DATA", help="tile stores with ground truth")
     parser.add_argument("--model", required=True, metavar="MODEL", help="output model (MODEL.npz + MODEL.json)")
@@ -50,6 +50,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="seed of the first generated building (default: ...train.synthetic-seed)")
     parser.add_argument("--area", type=float, default=None, metavar="M2",
                         help="floor area of each generated building (default: ...train.synthetic-area-m2)")
+    parser.add_argument("--styles", type=styles, default="classic", metavar="STYLES",
+                        help="the generated buildings' styles, as synth --styles: " + STYLES_HELP)
     parser.add_argument("--keep-synthetic", metavar="DIR", help="write the generated buildings here and keep them")
     parser.add_argument("--cv", action="store_true", help="building-wise cross-validation first (prints AP per fold)")
     parser.add_argument("--ablation", choices=["full", "no_local", "no_global", "no_color"], default="full",
@@ -75,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     ablation = "no_color" if args.no_colour else args.ablation
     plan = prepare_training(args.data, args.model, synthetic=args.synthetic, seed=args.seed, area=args.area,
                             keep_synthetic=args.keep_synthetic, cv=args.cv, ablation=ablation,
-                            classes=args.classes, rounds=args.rounds, storage_options=args.storage_options)
+                            classes=args.classes, rounds=args.rounds, storage_options=args.storage_options,
+                            styles=args.styles)
     with cluster_client(args.scheduler, n_workers=args.workers, memory_limit=args.memory_limit) as client:
         check_reachable(client, *args.data)
         result = train_model(plan, client=client)

@@ -38,7 +38,7 @@ def generate(out: str, *, seed: int = 0, area_m2: float | None = None, rooms: in
         ``"registration,glass"``, a list of names, ``{name: level}`` or a
         :class:`~engine.synth.hard.hardness.Hardness`; None: a clean building.
     styles
-        ``"classic"`` or ``"varied"`` (elements drawn from their style families; see
+        ``"classic"`` or style families such as ``"varied"`` or ``"varied,windows"`` (see
         :func:`engine.synth.plan.plan_building`).
 
     Returns

@@ -72,6 +72,9 @@ class Opening:
     swing: int = 1
     angle: float = 0.0
     elements: list[int] = field(default_factory=list)
+    mullion: float = 0.0  # windows: the spacing of vertical bars (0: one in the middle of a pane over 1.4 m)
+    sill_board: bool = True  # windows: a sill board under the pane, inside
+    style: str = ""  # windows of a ``windows`` building: punched, ribbon, full or tall ("": classic)
 
     @property
     def width(self) -> float:
@@ -200,6 +203,7 @@ class Space:
     density: float = 1.0
     noise: float = 0.004
     brightness: float = 1.0
+    voxel: float = 0.0  # the scan keeps one point per cell of a world grid this wide (m); 0: every point
     colours: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     scanners: np.ndarray | None = None
     elements: list[Element] = field(default_factory=list)

@@ -85,6 +85,8 @@ def space_colours(rng: np.random.Generator, space: Space, style: dict) -> None:
     space.brightness = float(rng.uniform(0.45, 0.7) if rng.random() < 0.15 else rng.uniform(0.8, 1.05))
     if "variety" in style:
         vary_scan(space, style["variety"])
+    if "subsample" in style:
+        subsample_scan(space, style["subsample"])
 
 
 #: The key of a room's scan-character stream in a varied building (its boards use keys 0, 1, ...).
@@ -102,6 +104,14 @@ def vary_scan(space: Space, variety: int) -> None:
         space.brightness = float(r.uniform(0.25, 0.45))
     space.noise = float(math.exp(r.uniform(math.log(0.001), math.log(0.010))))
     space.density *= float(math.exp(r.uniform(math.log(0.5), math.log(2.0))))
+
+
+def subsample_scan(space: Space, stream: int) -> None:
+    """A room of a ``styles="subsampled"`` building, after its classic draws (which stay as they are): its scan
+    keeps one point per cell of a world-aligned voxel grid 1-5 cm wide, as clouds often arrive (CloudCompare's
+    spatial subsampling, PDAL's voxel filters), from the room's own stream."""
+    r = np.random.default_rng([stream, int(space.id), SCAN_KEY])
+    space.voxel = float(r.uniform(0.01, 0.05))
 
 
 def shade(rng: np.random.Generator, base: np.ndarray, jitter: np.ndarray, brightness: float,

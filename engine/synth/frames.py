@@ -95,11 +95,15 @@ def window(w: Wall, o: Opening, side: int, space: Space, style: dict) -> Element
     h = zh - zs
     bars = [(o.s0 + FRAME_W / 2, (zs + zh) / 2, FRAME_W, h), (o.s1 - FRAME_W / 2, (zs + zh) / 2, FRAME_W, h),
             ((o.s0 + o.s1) / 2, zs + FRAME_W / 2, o.width, FRAME_W), ((o.s0 + o.s1) / 2, zh - FRAME_W / 2, o.width, FRAME_W)]
-    if o.width > 1.4:
+    if o.mullion > 0:  # bars every o.mullion metres, the panes equal
+        k = max(1, round(o.width / o.mullion))
+        bars += [(o.s0 + o.width * i / k, (zs + zh) / 2, FRAME_W, h - 2 * FRAME_W) for i in range(1, k)]
+    elif o.width > 1.4:
         bars.append(((o.s0 + o.s1) / 2, (zs + zh) / 2, FRAME_W, h - 2 * FRAME_W))
     for s, z, bw, bh in bars:
         prims.append(Box(at(p0, d, n, s, fo, z), np.array([bw, FRAME_D, bh]), w.yaw, frame, jitter=5.0))
-    sill = Box(at(p0, d, n, (o.s0 + o.s1) / 2, side * (t / 2 + 0.02), zs - 0.015),
-               np.array([o.width + 0.1, 0.04, 0.03]), w.yaw, frame, jitter=5.0)
-    prims.append(sill)
-    return Element(-1, "window", space.id, prims, yaw=w.yaw, info={"opening": o.id})
+    if o.sill_board:
+        prims.append(Box(at(p0, d, n, (o.s0 + o.s1) / 2, side * (t / 2 + 0.02), zs - 0.015),
+                         np.array([o.width + 0.1, 0.04, 0.03]), w.yaw, frame, jitter=5.0))
+    info = {"opening": o.id, "type": o.style} if o.style else {"opening": o.id}
+    return Element(-1, "window", space.id, prims, yaw=w.yaw, info=info)

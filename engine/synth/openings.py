@@ -157,9 +157,37 @@ def place_doors(rng: np.random.Generator, walls: list[Wall], spaces: list[Space]
         doors.add_exterior(walls)
 
 
+#: The key of an exterior wall's window-type stream in a ``windows`` building.
+WINDOW_KEY = 2_000_000
+
+
+def window_type(stream: int, wall: int) -> dict:
+    """The window type of an exterior wall of a ``windows`` building, from the wall's own stream: punched
+    windows of any size, a ribbon along the wall, full-height windows or tall narrow ones; mullions in half of
+    them (a ribbon's always), a sill board inside in half of those not at the floor."""
+    r = np.random.default_rng([stream, int(wall), WINDOW_KEY])
+    kind = ("punched", "ribbon", "full", "tall")[int(r.integers(4))]
+    if kind == "punched":
+        t = dict(window_width=r.uniform(0.6, 2.4), window_gap=r.uniform(0.4, 2.5), sill=r.uniform(0.5, 1.1),
+                 window_height=r.uniform(0.9, 2.0))
+    elif kind == "ribbon":
+        t = dict(window_width=math.inf, window_gap=0.0, sill=r.uniform(0.8, 1.1), window_height=r.uniform(0.6, 1.4))
+    elif kind == "full":
+        t = dict(window_width=r.uniform(0.8, 2.6), window_gap=r.uniform(0.2, 1.5), sill=r.uniform(0.0, 0.15),
+                 window_height=math.inf, head_gap=r.uniform(0.05, 0.4))
+    else:
+        t = dict(window_width=r.uniform(0.45, 0.9), window_gap=r.uniform(0.5, 1.5), sill=r.uniform(0.3, 0.8),
+                 window_height=r.uniform(1.8, 2.6))
+    t["mullion"] = r.uniform(0.9, 1.8) if kind == "ribbon" else (r.uniform(0.5, 1.2) if r.random() < 0.5 else 0.0)
+    t["sill_board"] = bool(t["sill"] > 0.3 and r.random() < 0.5)
+    t["type"] = kind
+    return t
+
+
 def place_windows(rng: np.random.Generator, walls: list[Wall], spaces: list[Space], openings: list[Opening],
                   style: dict) -> None:
-    """Regularly spaced windows on exterior walls (fewer in WCs and storage rooms)."""
+    """Regularly spaced windows on exterior walls (fewer in WCs and storage rooms); in a ``windows`` building,
+    of each wall's type (:func:`window_type`)."""
     for w in walls:
         if w.kind != "exterior":
             continue
@@ -167,27 +195,40 @@ def place_windows(rng: np.random.Generator, walls: list[Wall], spaces: list[Spac
         sp = spaces[sid]
         if sp.type in ("WC", "storage") and rng.random() < 0.5:
             continue
-        width = style["window_width"]
-        period = width + style["window_gap"]
+        t = window_type(style["windows"], w.id) if "windows" in style else style
         lo = w.ext0 + 0.35
         hi = w.length - w.ext1 - 0.35
         taken = [(o.s0 - 0.3, o.s1 + 0.3) for o in w.openings]
-        usable = hi - lo
-        n = int((usable + style["window_gap"]) // period)
-        if n < 1:
-            if usable < 0.9:
-                continue
-            n, width = 1, min(width, usable)
-        start = lo + (usable - (n * width + (n - 1) * style["window_gap"])) / 2
-        sill = w.z0 + style["sill"]
-        head = min(sill + style["window_height"], sp.z1 - 0.3)
+        sill = w.z0 + t["sill"]
+        head = min(sill + t["window_height"], sp.z1 - t.get("head_gap", 0.3))
         if head - sill < 0.5:
             continue
-        for k in range(n):
-            s0 = start + k * period
-            s1 = s0 + width
-            if any(s0 < b and s1 > a for a, b in taken):
-                continue
-            o = Opening(len(openings), "window", w.id, round(s0, 4), round(s1, 4), round(sill, 4), round(head, 4))
+        for s0, s1 in _window_spans(lo, hi, t["window_width"], t["window_gap"], taken):
+            o = Opening(len(openings), "window", w.id, round(s0, 4), round(s1, 4), round(sill, 4), round(head, 4),
+                        mullion=float(t.get("mullion", 0.0)), sill_board=bool(t.get("sill_board", True)),
+                        style=t.get("type", ""))
             w.openings.append(o)
             openings.append(o)
+
+
+def _window_spans(lo: float, hi: float, width: float, gap: float,
+                  taken: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Windows ``width`` wide, ``gap`` apart, centred on ``lo..hi``, clear of ``taken``; an infinite width is a
+    ribbon: one window over each stretch of ``lo..hi`` at least 0.9 m long between the taken ones."""
+    if math.isinf(width):
+        spans, x = [], lo
+        for a, b in sorted(taken) + [(hi, hi)]:
+            if min(a, hi) - x >= 0.9:
+                spans.append((x, min(a, hi)))
+            x = max(x, b)
+        return spans
+    usable = hi - lo
+    period = width + gap
+    n = int((usable + gap) // period)
+    if n < 1:
+        if usable < 0.9:
+            return []
+        n, width = 1, min(width, usable)
+    start = lo + (usable - (n * width + (n - 1) * gap)) / 2
+    spans = [(start + k * period, start + k * period + width) for k in range(n)]
+    return [(s0, s1) for s0, s1 in spans if not any(s0 < b and s1 > a for a, b in taken)]

@@ -37,7 +37,7 @@ from engine.synth.openings import place_doors, place_windows
 from engine.synth.parts import plan_parts
 from engine.synth.rooms import ensure_wc, new_space
 from engine.synth.scanners import place_scanners
-from engine.synth.streams import S_BUILDING, S_FLOOR, S_SPACE, S_VARIETY, STYLES, rng_for
+from engine.synth.streams import S_BUILDING, S_FLOOR, S_SPACE, S_SUBSAMPLE, S_VARIETY, S_WINDOWS, rng_for, style_families, style_name
 from engine.synth.walls import grid_walls, thickness_draw
 from tiles.errors import UserError
 
@@ -110,10 +110,14 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         ``"classic"`` (the training buildings' styles) or ``"varied"``: each element drawn from its style family
         (boards: with a pen tray or bare, 1-4 cm; rooms: saturated walls, dark rooms, scan noise 1-10 mm, a
         density factor x0.25-x4), from streams of its own: the plan is the classic building's, and so is the
-        furniture of every room without a new style (:data:`engine.synth.streams.STYLES`).
+        furniture of every room without a new style; ``"subsampled"``: each room's scan voxel-subsampled on a
+        1-5 cm grid; ``"windows"``: each exterior wall's window type (punched, ribbon, full-height, tall; with or
+        without mullions and sill); or a comma-separated combination (:data:`engine.synth.streams.FAMILIES`).
     """
-    if styles not in STYLES:
-        raise UserError(None, f"styles must be one of {', '.join(STYLES)}, not {styles!r}")
+    try:
+        families = style_families(styles)
+    except ValueError as e:
+        raise UserError(None, str(e)) from None
     area_m2, density = check_parameters(area_m2=area_m2, rooms=rooms, floors=floors, density=density, yaw=yaw,
                                         offset=offset, hardness=hardness)
     h = Hardness.parse(hardness)
@@ -127,8 +131,10 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
     frame = Frame(math.radians(float(yaw)), tuple(float(v) for v in offset))
 
     pl = _start_plan(int(seed), h, floors, area_m2, rooms, area_given)
-    if styles == "varied":
-        pl.style["variety"] = int(rng_for(int(seed), S_VARIETY).integers(2 ** 31))
+    for family, key, stream in (("varied", "variety", S_VARIETY), ("subsampled", "subsample", S_SUBSAMPLE),
+                                ("windows", "windows", S_WINDOWS)):
+        if family in families:
+            pl.style[key] = int(rng_for(int(seed), stream).integers(2 ** 31))
     z = 0.0
     for f in range(floors):
         z = _plan_floor(pl, f, z, top=(f == floors - 1))
@@ -139,8 +145,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
               "part_points": part_points, "generator": "engine.synth"}
     if h:
         params["hardness"] = h.to_dict()
-    if styles != "classic":
-        params["styles"] = styles
+    if families:
+        params["styles"] = style_name(families)
     b = Building(int(seed), frame, density, pl.spaces, pl.walls, pl.openings, pl.floor_infos, params=params)
     b.parts = plan_parts(b, part_points)
     return b

@@ -123,6 +123,9 @@ def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
     if sp.flying > 0 or sp.ghosts > 0 or sp.registration is not None:
         P, rgb, space, cls, inst, first = _hard(job, P, S, first, rects, scanners, order, rgb, space, cls, inst)
     world = job.frame.xyz(P)
+    if sp.voxel > 0:
+        keep = nearest_in_cell(world, sp.voxel)
+        world, rgb, space, cls, inst = world[keep], rgb[keep], space[keep], cls[keep], inst[keep]
     return {"x": world[:, 0], "y": world[:, 1], "z": world[:, 2],
             "red": rgb[:, 0], "green": rgb[:, 1], "blue": rgb[:, 2],
             "gt_space": space, "gt_class": cls, "gt_instance": inst}
@@ -175,6 +178,24 @@ def _surfaces(sp: Space, part: PartSpec) -> tuple[list[tuple[Rect, int, bool]], 
             elif whole or part.lo <= prim.center[part.axis] < part.hi:
                 rects += [(f, ei, True) for f in prim.faces(sp.z0, sp.z1)]
     return rects, tris
+
+
+def nearest_in_cell(xyz: np.ndarray, size: float) -> np.ndarray:
+    """The indices, in order, of the point nearest the centre of each occupied cell of the grid ``size`` wide (a
+    voxel subsampling like PDAL's ``filters.voxelcenternearestneighbor``; a cell cut by a part's border keeps a
+    point on each side)."""
+    if len(xyz) == 0:
+        return np.zeros(0, np.int64)
+    scaled = np.asarray(xyz, float) / size
+    cells = np.floor(scaled).astype(np.int64)
+    cells -= cells.min(axis=0)
+    span = cells.max(axis=0) + 1
+    key = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    off = np.sum((scaled - cells - np.floor(scaled.min(axis=0)) - 0.5) ** 2, axis=1)
+    order = np.lexsort((np.arange(len(key)), off, key))
+    first = np.ones(len(order), bool)
+    first[1:] = key[order[1:]] != key[order[:-1]]
+    return np.sort(order[first])
 
 
 def _clip_rect(r: Rect, part: PartSpec) -> Rect | None:

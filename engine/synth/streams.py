@@ -12,9 +12,36 @@ import numpy as np
 S_BUILDING, S_FLOOR, S_SPACE, S_SCAN = 0, 1, 2, 3
 #: The style variety's own streams (``styles="varied"``): a classic building's draws stay as they are.
 S_VARIETY = 4
-#: The style families: ``classic`` (the shipped model's training buildings) and ``varied`` (each element's style
-#: drawn from its family: :mod:`engine.synth.furniture`).
-STYLES = ("classic", "varied")
+#: The streams of the ``subsampled`` and ``windows`` style families.
+S_SUBSAMPLE, S_WINDOWS = 5, 6
+#: The style families a building may draw from, beyond ``classic`` (the shipped model's training buildings):
+#: ``varied`` (boards bare or with a tray, and each room's scan character: :mod:`engine.synth.furniture`,
+#: :func:`engine.synth.colours.vary_scan`), ``subsampled`` (each room's scan voxel-subsampled on a grid of its
+#: own: :func:`engine.synth.colours.subsample_scan`) and ``windows`` (each exterior wall's window type:
+#: :func:`engine.synth.openings.window_type`).  Each family has its own stream, so that families combine
+#: (``"varied,windows"``) and a building's other draws stay the classic building's.
+FAMILIES = ("varied", "subsampled", "windows")
+#: The single-family styles (``classic``: none), as the command lines offer them; any comma-separated
+#: combination of :data:`FAMILIES` is a style too (:func:`style_families`).
+STYLES = ("classic",) + FAMILIES
+
+
+def style_families(styles: str) -> tuple[str, ...]:
+    """The families of a style: ``"classic"`` -> ``()``, ``"windows,varied"`` -> ``("varied", "windows")``
+    (in :data:`FAMILIES`' order); :class:`ValueError` names an unknown one."""
+    names = [s.strip() for s in str(styles).split(",") if s.strip()]
+    if names == ["classic"]:
+        return ()
+    bad = [s for s in names if s not in FAMILIES]
+    if bad or not names:
+        raise ValueError(f"styles must be classic or a comma-separated combination of {', '.join(FAMILIES)}, "
+                         f"not {styles!r}")
+    return tuple(f for f in FAMILIES if f in names)
+
+
+def style_name(families: tuple[str, ...]) -> str:
+    """The canonical name of a combination of families (``"classic"`` for none)."""
+    return ",".join(families) or "classic"
 
 #: Average floor area per space, used to turn ``rooms`` into an area.
 AREA_PER_SPACE = 31.0

@@ -23,7 +23,7 @@ def synthetic_yaw(seed: int) -> float:
 
 
 def generate_buildings(where: str, first_seed: int, n: int, area: float, *, density: float | None = None,
-                       client=None) -> tuple[list[Any], list[str]]:
+                       client=None, styles: str = "classic") -> tuple[list[Any], list[str]]:
     """Generate ``n`` training buildings, seeds ``first_seed`` on, into ``where/synthetic-<seed>.zarr``.
 
     Parameters
@@ -38,6 +38,8 @@ def generate_buildings(where: str, first_seed: int, n: int, area: float, *, dens
         Points per m^2 of scanned surface; None: ``buildingparser.synth.density``.
     client
         A ``distributed.Client``; None generates here.
+    styles
+        The buildings' element styles (:func:`engine.synth.generate`): ``classic`` or ``varied``.
 
     Returns
     -------
@@ -50,8 +52,10 @@ def generate_buildings(where: str, first_seed: int, n: int, area: float, *, dens
         seed = first_seed + i
         out = os.path.join(where, f"synthetic-{seed}.zarr")
         yaw = synthetic_yaw(seed)
-        logger.info(f"generating building {i + 1}/{n} (seed {seed}, about {area:g} m2, yaw {yaw:.1f} deg)")
-        generate(out, seed=seed, area_m2=area, density=density, yaw=yaw, client=client, overwrite=True)
+        logger.info(f"generating building {i + 1}/{n} (seed {seed}, about {area:g} m2, yaw {yaw:.1f} deg, "
+                    f"{styles} styles)")
+        generate(out, seed=seed, area_m2=area, density=density, yaw=yaw, client=client, overwrite=True,
+                 styles=styles)
         stores.append(open_store(out))
         names.append(f"synthetic seed {seed}")
     return stores, names

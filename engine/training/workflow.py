@@ -16,6 +16,7 @@ from typing import Any
 from engine import config
 from engine.detection.layout import ABLATIONS
 from engine.detection.model import Model
+from engine.synth.streams import style_families, style_name
 from engine.training.evaluation import cross_validate
 from engine.training.settings import TrainSettings
 from engine.training.synthetic import generate_buildings
@@ -39,6 +40,7 @@ class TrainingPlan:
     cv: bool
     ablation: str
     storage_options: dict[str, Any] | None
+    styles: str = "classic"  # the generated buildings' element styles
 
 
 @dataclass
@@ -54,7 +56,7 @@ class TrainingResult:
 def prepare_training(data: Sequence[str], model: str, *, synthetic: int | None = None, seed: int | None = None,
                      area: float | None = None, keep_synthetic: str | None = None, cv: bool = False,
                      ablation: str = "full", classes: str | Sequence[str] | None = None, rounds: int | None = None,
-                     storage_options: dict[str, Any] | None = None) -> TrainingPlan:
+                     storage_options: dict[str, Any] | None = None, styles: str = "classic") -> TrainingPlan:
     """Check a ``train`` job before any work; a bad input raises :class:`tiles.errors.UserError`.
 
     Parameters
@@ -81,7 +83,14 @@ def prepare_training(data: Sequence[str], model: str, *, synthetic: int | None =
         Hard-negative mining rounds; None: ``...train.rounds``.
     storage_options
         fsspec options of the stores.
+    styles
+        The generated buildings' styles: ``classic``, or style families such as ``varied`` or
+        ``varied,windows`` (:data:`engine.synth.streams.FAMILIES`).
     """
+    try:
+        styles = style_name(style_families(styles))
+    except ValueError as e:
+        raise UserError(None, f"--{e}") from None
     if not data and synthetic is None:
         raise UserError(None, "nothing to train on: give tile stores with ground truth and/or --synthetic [N]")
     n_synth = 0
@@ -108,7 +117,7 @@ def prepare_training(data: Sequence[str], model: str, *, synthetic: int | None =
         extra["rounds"] = rounds
     settings = TrainSettings.from_config(disabled=ABLATIONS[ablation], **extra)
     return TrainingPlan(list(data), model, settings, n_synth, seed, area, keep_synthetic, cv, ablation,
-                        storage_options)
+                        storage_options, styles)
 
 
 def train_model(plan: TrainingPlan, *, client=None) -> TrainingResult:
@@ -119,13 +128,14 @@ def train_model(plan: TrainingPlan, *, client=None) -> TrainingResult:
         names = list(plan.data)
         if plan.synthetic:
             more, more_names = generate_buildings(plan.keep_synthetic or tmp, plan.seed, plan.synthetic, plan.area,
-                                                  client=client)
+                                                  client=client, styles=plan.styles)
             stores += more
             names += more_names
         cv = cross_validate(stores, client=client, settings=plan.settings, names=names) if plan.cv else None
-        provenance = {"data": names, "synthetic": {"buildings": plan.synthetic, "first_seed": plan.seed,
-                                                   "area_m2": plan.area} if plan.synthetic else None,
-                      "ablation": plan.ablation}
+        synthetic = {"buildings": plan.synthetic, "first_seed": plan.seed, "area_m2": plan.area}
+        if plan.styles != "classic":  # (a classic model's provenance stays as it was)
+            synthetic["styles"] = plan.styles
+        provenance = {"data": names, "synthetic": synthetic if plan.synthetic else None, "ablation": plan.ablation}
         t0 = time.perf_counter()
         model = train(stores, client=client, settings=plan.settings, provenance=provenance, names=names)
         seconds = time.perf_counter() - t0

@@ -62,3 +62,12 @@ def test_tight_boxes_are_the_tightest_boxes_of_each_elements_points(tmp_path):
         assert np.all(np.asarray(t["size"]) <= np.asarray(e["size"]) + 1e-9)  # never larger than the generator's
         checked += 1
     assert checked > 20
+
+
+def test_seen_and_unseen_styles_follow_the_models_training_styles():
+    from benchmarks.shipped_model import seen_styles, seen_unseen_line
+
+    assert seen_styles(None) == {"classic"}  # the shipped model: classic buildings only
+    line = seen_unseen_line({"classic": 80.0, "varied": 70.0, "subsampled": 60.0}, {"classic", "varied"})
+    assert "seen styles 75.0 (classic, varied), unseen 60.0 (subsampled), gap 15.0" in line
+    assert seen_unseen_line({"classic": 80.0}, {"classic"}) == ""

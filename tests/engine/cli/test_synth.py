@@ -70,3 +70,18 @@ def test_cli_training_yaw_gives_the_building_train_generates(tmp_path, client, m
     with pytest.raises(SystemExit) as stop:  # one or the other: argparse's usage error
         main(["synth", str(tmp_path / "z.zarr"), "--yaw", "3", "--training-yaw"])
     assert stop.value.code == 2
+
+
+def test_cli_styles_combine_families_in_one_order_and_refuse_unknown_ones(tmp_path, client, capsys):
+    from tiles.store import open_store
+
+    out = tmp_path / "s.zarr"
+    assert main(["synth", str(out), "--rooms", "4", "--density", "60", "--styles", "windows, subsampled",
+                 "--scheduler", client.scheduler.address]) == 0
+    assert open_store(str(out)).meta.sources[0].info["styles"] == "subsampled,windows"
+    with pytest.raises(SystemExit) as exit_:
+        main(["synth", str(tmp_path / "x.zarr"), "--styles", "varied,baroque"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "combination of varied, subsampled, windows, not 'varied,baroque'" in err[-1]
+    assert not (tmp_path / "x.zarr").exists()

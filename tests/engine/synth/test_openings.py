@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
-from engine.synth import colours
+from engine.synth import colours, plan_building
 from engine.synth.building import Space, Wall
 from engine.synth.layout import Draft
 from engine.synth.openings import door_room, place_doors, place_windows
@@ -72,3 +72,45 @@ def test_windows_are_spaced_on_exterior_walls_off_the_doors():
         for d in w.openings:
             if d.kind == "door":
                 assert o.s1 + 0.3 <= d.s0 or o.s0 >= d.s1 + 0.3
+
+
+def test_window_types_differ_per_wall_and_ribbons_run_between_the_doors():
+    from engine.synth.openings import window_type
+
+    types = [window_type(7, w) for w in range(200)]
+    assert {t["type"] for t in types} == {"punched", "ribbon", "full", "tall"}
+    assert all(t["sill"] <= 0.15 and not t["sill_board"] for t in types if t["type"] == "full")
+    assert all(t["mullion"] > 0 for t in types if t["type"] == "ribbon")
+    assert {t["sill_board"] for t in types} == {True, False}
+    assert window_type(7, 3) == window_type(7, 3) != window_type(8, 3)
+    spaces, drafts, walls = _floor(0)
+    openings: list = []
+    place_doors(np.random.default_rng(0), walls, spaces, openings, drafts, exterior_door=True)
+    n_doors = len(openings)
+    style = dict(colours.building_style(np.random.default_rng(0)), windows=7)
+    place_windows(np.random.default_rng(0), walls, spaces, openings, style)
+    windows = openings[n_doors:]
+    assert windows
+    for o in windows:
+        w, t = walls[o.wall], window_type(7, o.wall)
+        assert o.style == t["type"] and o.sill_board == t["sill_board"] and o.mullion == pytest.approx(t["mullion"])
+        assert o.z0 == pytest.approx(w.z0 + t["sill"], abs=1e-4) and o.z1 - o.z0 >= 0.5
+        for d in w.openings:
+            if d.kind == "door":
+                assert o.s1 + 0.3 <= d.s0 + 1e-9 or o.s0 >= d.s1 + 0.3 - 1e-9
+
+
+def test_a_windows_building_keeps_its_spaces_and_its_windows_boxes_hold_their_points(helpers):
+    from engine.synth import scan_building
+
+    classic, styled = (plan_building(21, area_m2=260, density=120, styles=s) for s in ("classic", "windows"))
+    assert styled.params["styles"] == "windows"
+    assert [s.footprint.tolist() for s in styled.spaces] == [s.footprint.tolist() for s in classic.spaces]
+    windows = [e for s in styled.spaces for e in s.elements if e.cls == "window"]
+    assert len({e.info["type"] for e in windows}) >= 2
+    assert all("type" not in e.info for s in classic.spaces for e in s.elements if e.cls == "window")
+    scan = scan_building(styled)
+    P = helpers.xyz(scan)
+    for e in styled.ground_truth()["elements"]:
+        sel = scan["gt_instance"] == e["id"]
+        assert helpers.in_box(P[sel], e, grow=1e-6).all(), e["class"]

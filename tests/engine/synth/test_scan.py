@@ -231,3 +231,39 @@ def test_big_spaces_are_scanned_in_pieces(helpers):
         flat = np.isin(cols["gt_class"], (0, 1))
         v = np.c_[cols["x"], cols["y"]][flat, p.axis]
         assert np.all((v >= p.lo - 1e-9) & (v <= p.hi + 1e-9))
+
+
+def test_a_subsampled_scan_keeps_the_point_nearest_each_cells_centre():
+    from engine.synth.scan import nearest_in_cell
+
+    rng = np.random.default_rng(3)
+    xyz = rng.uniform(0.0, 1.0, (20_000, 3)) + [500_000.0, 4_100_000.0, 30.0]
+    keep = nearest_in_cell(xyz, 0.1)
+    cells = np.floor(xyz / 0.1).astype(np.int64)
+    assert len(keep) == len(np.unique(cells, axis=0)) == len(np.unique(cells[keep], axis=0))
+    assert np.all(np.diff(keep) > 0)  # in the scan's order
+    d = np.sum((xyz - (cells + 0.5) * 0.1) ** 2, axis=1)
+    _, inverse = np.unique(cells, axis=0, return_inverse=True)
+    best = np.full(inverse.max() + 1, np.inf)
+    np.minimum.at(best, inverse.ravel(), d)
+    np.testing.assert_array_equal(d[keep], best[inverse.ravel()[keep]])
+    assert len(nearest_in_cell(xyz[:0], 0.1)) == 0
+
+
+def test_subsampled_rooms_hold_a_point_per_cell_of_their_own_grid(helpers):
+    classic, sub = (plan_building(13, area_m2=200, density=400, styles=s) for s in ("classic", "subsampled"))
+    assert sub.params["styles"] == "subsampled" and "styles" not in classic.params
+    assert [s.footprint.tolist() for s in sub.spaces] == [s.footprint.tolist() for s in classic.spaces]
+    voxels = [s.voxel for s in sub.spaces if s.scanned]
+    assert all(0.01 <= v <= 0.05 for v in voxels) and len(set(voxels)) == len(voxels)
+    assert all(s.voxel == 0 for s in classic.spaces)
+    space = max(sub.spaces, key=lambda s: s.voxel)
+    part = next(p for p in sub.parts if p.space == space.id)
+    a, b = scan_part(classic, part.part_id), scan_part(sub, part.part_id)
+    P = helpers.xyz(b)
+    cells = np.floor(P / space.voxel).astype(np.int64)
+    assert len(np.unique(cells, axis=0)) == len(P) < 0.9 * len(a["x"])
+    doc = {e["id"]: e for e in sub.ground_truth()["elements"]}
+    for i in np.unique(b["gt_instance"]):  # the ground truth still holds its points
+        sel = b["gt_instance"] == i
+        assert helpers.in_box(P[sel], doc[int(i)], grow=1e-6).all()
