@@ -23,7 +23,8 @@ def add_storage_options(parser: argparse.ArgumentParser) -> None:
 STYLES_HELP = ("classic (the shipped model's training buildings' styles; default) or a comma-separated combination "
                "of style families: varied (boards bare or with a tray; saturated, dark, noisier, sparser and denser "
                "rooms), subsampled (each room's scan voxel-subsampled on a 1-5 cm grid), windows (punched, ribbon, "
-               "full-height and tall windows, with or without mullions and sill); the plan of spaces stays the same")
+               "full-height and tall windows, with or without mullions and sill), doors (flush, glazed and sliding doors "
+               "beside classic ones); the plan of spaces stays the same")
 
 
 def styles(text: str) -> str:

@@ -23,6 +23,18 @@ CASING_W, CASING_D = 0.07, 0.015
 LEAF_T = 0.04
 FRAME_W, FRAME_D = 0.05, 0.07
 GLASS_INSET = 0.06  # glass plane distance from the outer face
+#: The key of a door's type stream in a ``doors`` building.
+DOOR_KEY = 3_000_000
+#: A ``doors`` building's door types (:func:`door_type`).
+DOOR_TYPES = ("classic", "flush", "glazed", "sliding")
+
+
+def door_type(stream: int, opening: int) -> str:
+    """The type of a door of a ``doors`` building, the same for both its sides: ``classic`` (casings, a leaf
+    like the wall's doors), ``flush`` (no casing, the frame in the wall's colour), ``glazed`` (a glass leaf, few
+    points) or ``sliding`` (the leaf slid along the wall's face, on one side), from the door's own stream."""
+    r = np.random.default_rng([stream, int(opening), DOOR_KEY])
+    return DOOR_TYPES[int(r.integers(len(DOOR_TYPES)))]
 
 
 def door_side(w: Wall, o: Opening, side: int, space: Space, style: dict) -> tuple[Element, Rect]:
@@ -31,10 +43,11 @@ def door_side(w: Wall, o: Opening, side: int, space: Space, style: dict) -> tupl
     t, zf, zh = w.thickness, w.z0, o.z1
     face = side * t / 2
     d3, n3 = v3(d), v3(n)
-    frame_rgb = space.colours["door_frame"]
+    kind = door_type(style["doors"], o.id) if "doors" in style else ""
+    frame_rgb = space.colours["wall"] if kind == "flush" else space.colours["door_frame"]
     leaf_rgb = space.colours["door"]
     leaf_kw = {}
-    if w.material == "glass":  # glass doors in glazed partitions: sparse like the glass
+    if w.material == "glass" or kind == "glazed":  # glass doors (and those of glazed partitions): sparse
         leaf_rgb, leaf_kw = colours.GLASS, {"jitter": 22.0, "density": GLASS_DENSITY}
     prims: list = [
         rect(at(p0, d, n, o.s0, 0, zf), n3 * face, [0, 0, zh - zf], d3, frame_rgb),
@@ -42,13 +55,20 @@ def door_side(w: Wall, o: Opening, side: int, space: Space, style: dict) -> tupl
         rect(at(p0, d, n, o.s0, 0, zh), d3 * o.width, n3 * face, DOWN, frame_rgb),
     ]
     off = side * (t / 2 + CASING_D / 2)
-    for s, size in ((o.s0 - CASING_W / 2, (CASING_W, CASING_D, zh - zf + CASING_W)),
-                    (o.s1 + CASING_W / 2, (CASING_W, CASING_D, zh - zf + CASING_W))):
-        c = at(p0, d, n, s, off, zf + size[2] / 2)
-        prims.append(Box(c, np.array(size), w.yaw, frame_rgb))
-    c = at(p0, d, n, (o.s0 + o.s1) / 2, off, zh + CASING_W / 2)
-    prims.append(Box(c, np.array([o.width + 2 * CASING_W, CASING_D, CASING_W]), w.yaw, frame_rgb))
-    if o.leaf != "none":
+    if kind != "flush":
+        for s, size in ((o.s0 - CASING_W / 2, (CASING_W, CASING_D, zh - zf + CASING_W)),
+                        (o.s1 + CASING_W / 2, (CASING_W, CASING_D, zh - zf + CASING_W))):
+            c = at(p0, d, n, s, off, zf + size[2] / 2)
+            prims.append(Box(c, np.array(size), w.yaw, frame_rgb))
+        c = at(p0, d, n, (o.s0 + o.s1) / 2, off, zh + CASING_W / 2)
+        prims.append(Box(c, np.array([o.width + 2 * CASING_W, CASING_D, CASING_W]), w.yaw, frame_rgb))
+    if kind == "sliding":
+        if o.leaf != "none" and o.swing == side:  # one leaf on the room's face, slid 0-95 % open
+            shift = (0.95 if o.leaf == "open" else 0.0) * o.width * (1 if o.id % 2 == 0 else -1)
+            c2 = at(p0, d, n, (o.s0 + o.s1) / 2 + shift, side * (t / 2 + CASING_D + 0.01 + LEAF_T / 2),
+                    zf + (zh - zf) / 2)
+            prims.append(Box(c2, np.array([o.width + 0.04, LEAF_T, zh - zf + 0.02]), w.yaw, leaf_rgb, **leaf_kw))
+    elif o.leaf != "none":
         lw = o.width / o.leaves - 0.01
         lh = zh - zf - 0.01
         hinges = [0] if o.leaves == 1 and o.id % 2 == 0 else [1] if o.leaves == 1 else [0, 1]
@@ -68,7 +88,8 @@ def door_side(w: Wall, o: Opening, side: int, space: Space, style: dict) -> tupl
                                  math.atan2(ldir[1], ldir[0]), leaf_rgb, **leaf_kw))
     threshold = rect(at(p0, d, n, o.s0, 0, zf), d3 * o.width, n3 * face, UP, space.colours["floor"],
                      jitter=space.colours.get("floor_jitter", 8.0))
-    return Element(-1, "door", space.id, prims, yaw=w.yaw, info={"opening": o.id}), threshold
+    info = {"opening": o.id, "type": kind} if kind else {"opening": o.id}
+    return Element(-1, "door", space.id, prims, yaw=w.yaw, info=info), threshold
 
 
 def window(w: Wall, o: Opening, side: int, space: Space, style: dict) -> Element:

@@ -37,7 +37,18 @@ from engine.synth.openings import place_doors, place_windows
 from engine.synth.parts import plan_parts
 from engine.synth.rooms import ensure_wc, new_space
 from engine.synth.scanners import place_scanners
-from engine.synth.streams import S_BUILDING, S_FLOOR, S_SPACE, S_SUBSAMPLE, S_VARIETY, S_WINDOWS, rng_for, style_families, style_name
+from engine.synth.streams import (
+    S_BUILDING,
+    S_DOORS,
+    S_FLOOR,
+    S_SPACE,
+    S_SUBSAMPLE,
+    S_VARIETY,
+    S_WINDOWS,
+    rng_for,
+    style_families,
+    style_name,
+)
 from engine.synth.walls import grid_walls, thickness_draw
 from tiles.errors import UserError
 
@@ -112,7 +123,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         density factor x0.25-x4), from streams of its own: the plan is the classic building's, and so is the
         furniture of every room without a new style; ``"subsampled"``: each room's scan voxel-subsampled on a
         1-5 cm grid; ``"windows"``: each exterior wall's window type (punched, ribbon, full-height, tall; with or
-        without mullions and sill); or a comma-separated combination (:data:`engine.synth.streams.FAMILIES`).
+        without mullions and sill); ``"doors"``: each door's type (classic, flush, glazed, sliding); or a
+        comma-separated combination (:data:`engine.synth.streams.FAMILIES`).
     """
     try:
         families = style_families(styles)
@@ -132,7 +144,7 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
 
     pl = _start_plan(int(seed), h, floors, area_m2, rooms, area_given)
     for family, key, stream in (("varied", "variety", S_VARIETY), ("subsampled", "subsample", S_SUBSAMPLE),
-                                ("windows", "windows", S_WINDOWS)):
+                                ("windows", "windows", S_WINDOWS), ("doors", "doors", S_DOORS)):
         if family in families:
             pl.style[key] = int(rng_for(int(seed), stream).integers(2 ** 31))
     z = 0.0

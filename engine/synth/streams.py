@@ -12,15 +12,16 @@ import numpy as np
 S_BUILDING, S_FLOOR, S_SPACE, S_SCAN = 0, 1, 2, 3
 #: The style variety's own streams (``styles="varied"``): a classic building's draws stay as they are.
 S_VARIETY = 4
-#: The streams of the ``subsampled`` and ``windows`` style families.
-S_SUBSAMPLE, S_WINDOWS = 5, 6
+#: The streams of the ``subsampled``, ``windows`` and ``doors`` style families.
+S_SUBSAMPLE, S_WINDOWS, S_DOORS = 5, 6, 7
 #: The style families a building may draw from, beyond ``classic`` (the shipped model's training buildings):
 #: ``varied`` (boards bare or with a tray, and each room's scan character: :mod:`engine.synth.furniture`,
 #: :func:`engine.synth.colours.vary_scan`), ``subsampled`` (each room's scan voxel-subsampled on a grid of its
-#: own: :func:`engine.synth.colours.subsample_scan`) and ``windows`` (each exterior wall's window type:
-#: :func:`engine.synth.openings.window_type`).  Each family has its own stream, so that families combine
+#: own: :func:`engine.synth.colours.subsample_scan`), ``windows`` (each exterior wall's window type:
+#: :func:`engine.synth.openings.window_type`) and ``doors`` (each door's type:
+#: :func:`engine.synth.frames.door_type`).  Each family has its own stream, so that families combine
 #: (``"varied,windows"``) and a building's other draws stay the classic building's.
-FAMILIES = ("varied", "subsampled", "windows")
+FAMILIES = ("varied", "subsampled", "windows", "doors")
 #: The single-family styles (``classic``: none), as the command lines offer them; any comma-separated
 #: combination of :data:`FAMILIES` is a style too (:func:`style_families`).
 STYLES = ("classic",) + FAMILIES
