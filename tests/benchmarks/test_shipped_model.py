@@ -67,7 +67,8 @@ def test_tight_boxes_are_the_tightest_boxes_of_each_elements_points(tmp_path):
 def test_seen_and_unseen_styles_follow_the_models_training_styles():
     from benchmarks.shipped_model import seen_styles, seen_unseen_line
 
-    assert seen_styles(None) == {"classic"}  # the shipped model: classic buildings only
-    line = seen_unseen_line({"classic": 80.0, "varied": 70.0, "subsampled": 60.0}, {"classic", "varied"})
-    assert "seen styles 75.0 (classic, varied), unseen 60.0 (subsampled), gap 15.0" in line
-    assert seen_unseen_line({"classic": 80.0}, {"classic"}) == ""
+    assert seen_styles(None) == set()  # the shipped model: classic buildings, no style family
+    line = seen_unseen_line({"classic": 80.0, "varied": 70.0, "subsampled": 60.0, "windows": 66.0},
+                            {"varied", "windows"})
+    assert "seen styles 72.0 (classic, varied, windows), unseen 60.0 (subsampled), gap 12.0" in line
+    assert seen_unseen_line({"classic": 80.0}, set()) == ""
