@@ -13,9 +13,9 @@ space is detected on its ground-truth points and scored with VOC AP at 3D IoU
 set (score > 0), the set the CRF keeps, and all proposals ranked by the CRF's
 contextual score.  Not a ``bench_*`` suite: ``make bench`` does not run it.
 
-``--styles classic varied subsampled`` evaluates the held-out buildings in the styles the
-model was trained on (classic, and the styles its model JSON records) and in styles it never saw
-(``engine.synth`` ``styles``), side by side, with the gap of their mAP; ``--foreign ../shared/foreign/f11 ...``
+``--styles classic varied windows doors subsampled`` evaluates the held-out buildings in each style
+(``engine.synth`` ``styles``): seen when the model was trained on all its style families (its model JSON
+records them; classic has none), else unseen; side by side, with the gap of their mAP; ``--foreign ../shared/foreign/f11 ...``
 adds the foreign buildings beside them (detected in their ground-truth spaces,
 scored by this evaluator without their ``difficult`` elements; ``score.py``
 scores a whole run).  ``--tight-gt`` scores against the tightest box of each element's points in its
