@@ -22,9 +22,6 @@ S_SUBSAMPLE, S_WINDOWS, S_DOORS = 5, 6, 7
 #: :func:`engine.synth.frames.door_type`).  Each family has its own stream, so that families combine
 #: (``"varied,windows"``) and a building's other draws stay the classic building's.
 FAMILIES = ("varied", "subsampled", "windows", "doors")
-#: The single-family styles (``classic``: none), as the command lines offer them; any comma-separated
-#: combination of :data:`FAMILIES` is a style too (:func:`style_families`).
-STYLES = ("classic",) + FAMILIES
 
 
 def style_families(styles: str) -> tuple[str, ...]:

@@ -39,7 +39,7 @@ def generate_buildings(where: str, first_seed: int, n: int, area: float, *, dens
     client
         A ``distributed.Client``; None generates here.
     styles
-        The buildings' element styles (:func:`engine.synth.generate`): ``classic`` or ``varied``.
+        The buildings' styles (:func:`engine.synth.generate`): ``classic`` or style families (``varied,windows``).
 
     Returns
     -------
