@@ -11,12 +11,16 @@ Along the detection's thin horizontal axis the fit looks at two sets of points:
 the wall *around* the element (the same heights, a strip beside each of its
 ends) gives the wall's plane, the densest bin of their positions; the points
 within the element's footprint from :data:`BEHIND` behind the plane to
-``planar-depth`` metres in front of it are the element (its face, edges and
-tray, with their scan noise; a chair further out is not).  The box is their
-``[planar-quantile, 1 - planar-quantile]`` quantile span: the tightest box of
-the element's points, as S3DIS's boxes are, without the few stray points.  No wall beside the element
-(it fills the wall's width), too few points, or no point in front of the
-plane: the box is left as it is.  Settings: ``buildingparser.detection.planar-*``.
+``planar-depth`` metres in front of it, in runs separated by :data:`GAP` without
+a point, hold the element: its face, edges and tray are one run, the first from
+the back (a chair or a table in front is across a gap).  The box runs from the
+run's ``planar-quantile`` quantile (the wall's side, where the wall's own noise
+mixes in) to its farthest point: the tightest box of the element's points, as
+S3DIS's boxes are.  No wall beside the element (it fills the wall's width), too
+few points, no point in front of the plane, or a run that goes on to
+``planar-depth`` (a shelf's side or a corner's wall across the element's front:
+the points do not show where it ends): the box is left as it is.
+Settings: ``buildingparser.detection.planar-*``.
 """
 from __future__ import annotations
 
@@ -33,6 +37,9 @@ MIN_POINTS = 20
 #: How far behind the wall's plane (metres) an element's points may lie: scan noise and the edges of a board
 #: seen at its back, never the wall's other face.
 BEHIND = 0.03
+#: A stretch along the normal (metres) without a point that ends the element: its face, edges and tray are
+#: continuous in depth; a chair, a table or a sill in front of it is across such a gap.
+GAP = 0.02
 
 
 def wall_plane(values: np.ndarray) -> float | None:
@@ -61,8 +68,22 @@ def fit_depth(inside: np.ndarray, beside: np.ndarray, depth: float, quantile: fl
     mine = front[(front >= -BEHIND) & (front <= depth)]
     if np.count_nonzero(mine > PLANE_BIN) < MIN_POINTS:
         return None
-    a, b = (float(v) for v in np.quantile(mine, [quantile, 1.0 - quantile]))
+    run = element_run(mine)
+    if run is None or run[-1] > depth - GAP:  # no run, or one that runs on: something crosses the element's front
+        return None
+    a, b = float(np.quantile(run, quantile)), float(run[-1])
     return (plane + a, plane + b) if side > 0 else (plane - b, plane - a)
+
+
+def element_run(front: np.ndarray) -> np.ndarray | None:
+    """The sorted positions of the first run of ``front`` (from the back) holding :data:`MIN_POINTS` points,
+    runs being separated by :data:`GAP` without a point; None when no run holds that many."""
+    v = np.sort(front)
+    cuts = np.concatenate([[0], np.flatnonzero(np.diff(v) > GAP) + 1, [len(v)]])
+    for s, e in zip(cuts[:-1], cuts[1:]):
+        if e - s >= MIN_POINTS:
+            return v[s:e]
+    return None
 
 
 def fit_planar(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray, points_in_metric: Any,
@@ -94,4 +115,4 @@ def fit_planar(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray, point
     return done
 
 
-__all__ = ["fit_depth", "fit_planar", "wall_plane"]
+__all__ = ["element_run", "fit_depth", "fit_planar", "wall_plane"]
