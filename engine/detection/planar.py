@@ -13,7 +13,8 @@ ends) gives the wall's plane, the densest bin of their positions; the points
 within the element's footprint from :data:`BEHIND` behind the plane to
 ``planar-depth`` metres in front of it, in runs separated by :data:`GAP` without
 a point, hold the element: its face, edges and tray are one run, the first from
-the back (a chair or a table in front is across a gap).  The box runs from the
+the back (a chair or a table in front is across a gap); the front is the side
+facing the room, away from the space's nearer end.  The box runs from the
 run's ``planar-quantile`` quantile (the wall's side, where the wall's own noise
 mixes in) to its farthest point: the tightest box of the element's points, as
 S3DIS's boxes are.  No wall beside the element (it fills the wall's width), too
@@ -54,16 +55,21 @@ def wall_plane(values: np.ndarray) -> float | None:
     return float(np.median(near))
 
 
-def fit_depth(inside: np.ndarray, beside: np.ndarray, depth: float, quantile: float) -> tuple[float, float] | None:
+def fit_depth(inside: np.ndarray, beside: np.ndarray, depth: float, quantile: float,
+              side: float | None = None) -> tuple[float, float] | None:
     """The extent along the wall's normal of an element whose footprint holds the positions ``inside``, with
-    the wall beside it at the positions ``beside``; None when the points do not show it (see the module doc)."""
+    the wall beside it at the positions ``beside``; None when the points do not show it (see the module doc).
+
+    ``side``: +1 when the room (the element's front) lies towards larger positions, -1 towards smaller ones;
+    None: the side holding more of the footprint's points.
+    """
     plane = wall_plane(beside)
     if plane is None or len(inside) < MIN_POINTS:
         return None
     ahead = inside - plane
-    # the element stands on the side where its footprint's points are
-    side = 1.0 if np.count_nonzero((ahead > PLANE_BIN) & (ahead <= depth)) >= \
-        np.count_nonzero((ahead < -PLANE_BIN) & (ahead >= -depth)) else -1.0
+    if side is None:  # the element stands on the side where its footprint's points are
+        side = 1.0 if np.count_nonzero((ahead > PLANE_BIN) & (ahead <= depth)) >= \
+            np.count_nonzero((ahead < -PLANE_BIN) & (ahead >= -depth)) else -1.0
     front = side * ahead
     mine = front[(front >= -BEHIND) & (front <= depth)]
     if np.count_nonzero(mine > PLANE_BIN) < MIN_POINTS:
@@ -87,13 +93,18 @@ def element_run(front: np.ndarray) -> np.ndarray | None:
 
 
 def fit_planar(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray, points_in_metric: Any,
-               classes: tuple[str, ...], depth: float, beside: float, quantile: float) -> int:
+               classes: tuple[str, ...], depth: float, beside: float, quantile: float,
+               extent: np.ndarray | None = None) -> int:
     """Fit in place the depth (``lo_m``, ``hi_m``: ``(n, 3)`` canonical metres) of the detections of ``classes``
     along their thinner horizontal axis; returns how many were fitted.
 
     ``points_in_metric(lo, hi)`` gives a superset of the canonical points of a metric box
     (:meth:`engine.detection.pointindex.PointIndex.points_in_metric`); ``beside`` is the width (metres) of the
-    strips of wall looked at beside each end of the element.
+    strips of wall looked at beside each end of the element.  With the space's ``extent`` (canonical metres) the
+    element's wall is the one at the space's nearer end along that axis, its front faces the room (a board hangs
+    on a wall that bounds its space); without it, the side holding more of the footprint's points.  The points
+    cannot tell the side when the strips beside a detection narrower than its board hold the board's face: the
+    face is then the densest plane, with as many points behind it as in front.
     """
     codes = [ELEMENT_CLASSES.index(c) for c in classes]
     done = 0
@@ -108,7 +119,8 @@ def fit_planar(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray, point
         pts = points_in_metric(glo, ghi)
         pts = pts[np.all((pts >= glo) & (pts <= ghi), axis=1)]
         within = (pts[:, b] >= lo_m[i, b]) & (pts[:, b] <= hi_m[i, b])
-        fit = fit_depth(pts[within, a], pts[~within, a], depth, quantile)
+        side = None if extent is None else (1.0 if centre <= 0.5 * float(extent[a]) else -1.0)
+        fit = fit_depth(pts[within, a], pts[~within, a], depth, quantile, side)
         if fit is not None:
             lo_m[i, a], hi_m[i, a] = fit
             done += 1

@@ -99,7 +99,7 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     if settings.refine and index is not None and settings.planar_classes:
         # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)
         fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
-                   settings.planar_beside, settings.planar_quantile)
+                   settings.planar_beside, settings.planar_quantile, np.asarray(vol.frame.extent, float))
     return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat)
 
 

@@ -64,6 +64,32 @@ def test_no_fit_without_wall_beside_or_for_other_classes():
     assert _fit(pts, [2.9, 1.95, 0.95], [3.0, 4.05, 2.05], classes=("window",))[0] == 0
 
 
+def test_the_room_side_comes_from_the_space_when_the_strips_beside_hold_the_board():
+    """A detection narrower than its board: the strips beside it lie on the board's face, which becomes the
+    densest plane; the frame's bottom edge behind the face outnumbers the tray's points in front, so the points
+    would put the room behind the board.  The space's extent says where the room is (the wall at its nearer end)."""
+    rng = np.random.default_rng(9)
+    n = 30000
+    y, z = rng.uniform(1.8, 4.2, n), rng.uniform(0.9, 2.1, n)
+    on_board = (y > 2) & (y < 4) & (z > 1) & (z < 2)
+    face = np.column_stack([np.where(on_board, WALL - 0.02, WALL), y, z])
+    m = 1200  # the frame's bottom edge, between the face and the wall
+    edge = np.column_stack([WALL - rng.uniform(0, 0.02, m), rng.uniform(2.0, 4.0, m), np.full(m, 1.0)])
+    k = 300  # the tray, 6 cm deep, in front
+    tray = np.column_stack([WALL - rng.uniform(0.02, 0.06, k), rng.uniform(2.4, 3.6, k), np.full(k, 1.0)])
+    pts = np.concatenate([face, edge, tray])
+    pts[:, 0] += rng.normal(0, NOISE, len(pts))
+    box = ([2.9, 2.3, 0.95], [3.0, 3.7, 2.05])  # 1.4 m of a 2 m board: the 0.3 m strips beside are on its face
+    points_in = lambda a, b: pts[np.all((pts >= a) & (pts <= b), axis=1)]  # noqa: E731
+    lo_m, hi_m = np.array([box[0]], float), np.array([box[1]], float)
+    board = np.array([ELEMENT_CLASSES.index("board")])
+    assert fit_planar(lo_m, hi_m, board, points_in, ("board",), 0.15, 0.3, 0.005, np.array([3.0, 6.0, 3.0])) == 1
+    assert WALL - 0.06 - 5 * NOISE <= lo_m[0, 0] <= WALL - 0.06 and hi_m[0, 0] == pytest.approx(WALL, abs=4 * NOISE)
+    guess_lo, guess_hi = np.array([box[0]], float), np.array([box[1]], float)
+    fit_planar(guess_lo, guess_hi, board, points_in, ("board",), 0.15, 0.3, 0.005)  # the side from the counts
+    assert guess_lo[0, 0] > WALL - 0.05  # the tray left out: the fit went the wrong way
+
+
 def test_no_fit_where_a_surface_runs_on_across_the_front():
     """A shelf's side from the wall to 40 cm out within the footprint: the points do not show the board's front."""
     pts = _scene(np.random.default_rng(7), False, False, side=True)
