@@ -115,7 +115,7 @@ SETTINGS: dict[str, Any] = {
     "crf": {
         "k": "int >= 0", "k-per-class": "classes -> int >= 0", "max-nodes-per-class": "int >= 1",
         "seed": "int >= 0", "linearization-level": "int in [0, 2]", "deterministic-time": "float > 0",
-        "time-limit": "float > 0", "objective-resolution": "int in [1, 1099511627776]",
+        "time-limit": "float > 0", "objective-resolution": "int in [1, 1099511627776]", "keep-classes": "classes",
         "ssvm": {"lam": "float > 0", "iterations": "int >= 1", "tol": "float >= 0", "miss-cost": "float > 0",
                  "iou": "float in [0, 1]"},
         "train": {"miss-costs": "floats > 0", "synthetic-buildings": "int >= 1", "synthetic-seed": "int >= 0",

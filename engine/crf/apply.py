@@ -104,7 +104,7 @@ def select_space(proposals: list[Proposal], weights: CRFWeights,
             "kept": 0, "objective": 0.0, "warning": None}
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
-    y, sinfo = solve_fixed(unary, graph.edges, pairwise, fixed_labels(graph, weights), settings)
+    y, sinfo = solve_fixed(unary, graph.edges, pairwise, fixed_labels(graph, weights, settings.keep_classes), settings)
     warning = f"space {sid}: {sinfo['warning']}" if sinfo["warning"] else None
     info = {"space_id": sid, "status": sinfo["status"], "seconds": time.perf_counter() - t0,
             "solver_seconds": sinfo["seconds"], "nodes": graph.n, "edges": graph.m, "kept": int(y.sum()),

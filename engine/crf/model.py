@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from engine import config
-from tiles.classes import ELEMENT_CLASSES
+from tiles.classes import ELEMENT_CLASSES, element_class_list
 
 #: Classes that take part in the CRF (the 12 element classes; clutter is not an element).
 N_CLASSES = len(ELEMENT_CLASSES)
@@ -234,7 +234,11 @@ def default_k(overrides: dict[str, int] | None = None) -> np.ndarray:
 # -----------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CRFSettings:
-    """How the CRF of one space is bounded and solved (read on the driver, sent to the tasks)."""
+    """How the CRF of one space is bounded and solved (read on the driver, sent to the tasks).
+
+    ``keep_classes``: the proposals of these classes are always kept, whatever their score or the CRF
+    (a space's one ceiling and one floor: the detector gives each space exactly one of each).
+    """
 
     max_nodes_per_class: int = 40
     seed: int = 0
@@ -242,8 +246,10 @@ class CRFSettings:
     deterministic_time: float = 20.0
     time_limit: float = 30.0
     resolution: int = 1_000_000
+    keep_classes: tuple[str, ...] = ("ceiling", "floor")
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "keep_classes", element_class_list(self.keep_classes, "keep-classes"))
         if self.max_nodes_per_class < 1:
             raise ValueError(f"max-nodes-per-class must be >= 1, not {self.max_nodes_per_class}")
         if self.linearization_level not in (0, 1, 2):
@@ -259,7 +265,7 @@ class CRFSettings:
         vals = config.settings_fields(cls, "crf", keys={
             "max_nodes_per_class": "max-nodes-per-class", "seed": "seed",
             "linearization_level": "linearization-level", "deterministic_time": "deterministic-time",
-            "time_limit": "time-limit", "resolution": "objective-resolution"})
+            "time_limit": "time-limit", "resolution": "objective-resolution", "keep_classes": "keep-classes"})
         vals.update({k: v for k, v in overrides.items() if v is not None})
         return cls(**vals)
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from engine.crf.graph import CRFGraph, energy
 from engine.crf.model import CRFSettings, CRFWeights
+from tiles.classes import ELEMENT_CLASSES
 
 
 def solve_ip(unary: np.ndarray, edges: np.ndarray, pairwise: np.ndarray,
@@ -119,13 +120,14 @@ def _solver(settings: CRFSettings) -> Any:
     return solver
 
 
-def fixed_labels(graph: CRFGraph, weights: CRFWeights) -> np.ndarray | None:
-    """Per node: 1/0 for the nodes of classes the CRF does not decide (the detector's score > 0), -1 for
-    the free ones; None when the CRF decides every node."""
-    fixed = ~weights.decides[graph.classes]
+def fixed_labels(graph: CRFGraph, weights: CRFWeights, keep: tuple[str, ...] = ()) -> np.ndarray | None:
+    """Per node: 1 for the nodes of the classes ``keep`` (always kept), 1/0 for those of classes the CRF
+    does not decide (the detector's score > 0), -1 for the free ones; None when every node is free."""
+    kept = np.isin(graph.classes, [ELEMENT_CLASSES.index(c) for c in keep])
+    fixed = ~weights.decides[graph.classes] | kept
     if not fixed.any():
         return None
-    return np.where(fixed, (graph.scores > 0).astype(np.int64), -1)
+    return np.where(kept, 1, np.where(fixed, (graph.scores > 0).astype(np.int64), -1))
 
 
 def fix_labels(unary: np.ndarray, edges: np.ndarray, pairwise: np.ndarray,

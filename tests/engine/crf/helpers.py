@@ -11,6 +11,7 @@ from engine.detection.proposals import Proposal
 from tiles.classes import CLASS_CODES
 
 WALL, DOOR, CHAIR, TABLE = (CLASS_CODES[c] for c in ("wall", "door", "chair", "table"))
+CEILING, FLOOR = CLASS_CODES["ceiling"], CLASS_CODES["floor"]
 K = 2
 
 

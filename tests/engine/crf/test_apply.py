@@ -12,8 +12,10 @@ from engine.crf.model import CRFSettings, CRFWeights
 from engine.crf.scenes import make_scenes
 from engine.crf.solve import solve_ip
 from tests.engine.crf.helpers import (
+    CEILING,
     CHAIR,
     DOOR,
+    FLOOR,
     TABLE,
     WALL,
     K,
@@ -33,7 +35,7 @@ def test_select_elements_optimum_equals_brute_force(seed):
     w = random_weights(rng)
     graph = build_graph(props, w.k, w.grid)
     unary, pairwise = energies(graph, w)
-    kept, info = select_elements(props, w)
+    kept, info = select_elements(props, w, settings=CRFSettings(keep_classes=()))  # every node free
     y = np.array([any(p is q for q in kept) for p in props])
     assert info["status"] in ("OPTIMAL", "TRIVIAL") and info["nodes"] == len(props)
     assert abs(energy(unary, graph.edges, pairwise, y) - brute_force(unary, graph.edges, pairwise)) <= \
@@ -180,3 +182,21 @@ def test_apply_crf_reports_a_space_not_solved_to_optimality(client):
     bad = [i for i in report["per_space"] if i["status"] != "TRIVIAL"][0]
     assert bad["warning"] and bad["space_id"] == hard[0].space_id
     assert easy[0] in kept  # the other space is unaffected
+
+
+def test_a_spaces_ceiling_and_floor_are_kept_whatever_their_score():
+    # a ceiling and a floor the detector scored <= 0 (surfaces unlike the training ones), a wall it scored < 0
+    props = [prop(CEILING, [0, 0, 0.95], [1, 1, 0.05], -0.6), prop(FLOOR, [0, 0, 0], [1, 1, 0.05], 0.0),
+             prop(WALL, [0.1, 0.1, 0], [0.05, 0.8, 1], -0.3)]
+    w = CRFWeights.new(K, k=2)
+    w.decides[:] = False  # every class keeps the detector's decision...
+    kept, _ = select_elements(props, w)
+    assert [p.class_code for p in kept] == [CEILING, FLOOR]  # ...but a space's ceiling and floor
+    w.decides[:] = True
+    w.bias[CEILING] = w.bias[FLOOR] = -10.0  # a CRF that would drop them keeps them too
+    kept, _ = select_elements(props, w)
+    assert [p.class_code for p in kept] == [CEILING, FLOOR]
+    kept, _ = select_elements(props, w, settings=CRFSettings(keep_classes=()))
+    assert kept == []
+    with pytest.raises(ValueError, match="keep-classes"):
+        CRFSettings(keep_classes="ceiling,attic")
