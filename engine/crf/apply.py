@@ -133,9 +133,9 @@ def apply_crf(proposals: list[Proposal], weights: CRFWeights, client=None, *,
         The kept proposals in their input order (every input proposal gets its contextual score in
         ``extra["crf_margin"]``, :func:`flip_margins`), and the ``crf`` block of ``metrics.json``:
         ``{"spaces", "solve_seconds": {"median", "max"}, "status": {name: count}, "proposals", "kept",
-        "decides": [class, ...], "per_space": [info, ...]}`` (``solve_seconds`` is graph building +
-        solving, per space; ``decides``: the classes whose keep/drop the CRF decided, the others kept
-        the detector's decision).
+        "decides": [class, ...], "always_kept": [class, ...], "per_space": [info, ...]}`` (``solve_seconds``
+        is graph building + solving, per space; ``decides``: the classes whose keep/drop the CRF decided, the
+        others kept the detector's decision; ``always_kept``: ``crf.keep-classes``, kept whatever their score).
     """
     if not isinstance(weights, CRFWeights):
         raise TypeError(f"weights must be CRFWeights, not {type(weights).__name__}")
@@ -170,11 +170,12 @@ def apply_crf(proposals: list[Proposal], weights: CRFWeights, client=None, *,
               "solve_seconds": {"median": statistics.median(secs) if secs else 0.0, "max": max(secs, default=0.0)},
               "status": dict(sorted(Counter(i["status"] for i in infos).items())),
               "proposals": len(proposals), "kept": int(keep.sum()),
-              "decides": [c for c, d in zip(ELEMENT_CLASSES, weights.decides) if d], "per_space": infos}
+              "decides": [c for c, d in zip(ELEMENT_CLASSES, weights.decides) if d],
+              "always_kept": list(settings.keep_classes), "per_space": infos}
     return [p for p, k in zip(proposals, keep) if k], report
 
 
 def metrics_block(report: dict[str, Any]) -> dict[str, Any]:
     """The ``crf`` block of ``metrics.json`` from an :func:`apply_crf` report (without the per-space details)."""
-    return {k: report[k] for k in ("spaces", "solve_seconds", "status", "proposals", "kept", "decides")
-            if k in report}
+    return {k: report[k] for k in ("spaces", "solve_seconds", "status", "proposals", "kept", "decides",
+                                   "always_kept") if k in report}

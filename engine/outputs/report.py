@@ -235,6 +235,8 @@ def _crf_section(m: dict[str, Any]) -> str:
         d = list(c.get("decides") or [])
         rows.append(["classes the CRF decides", ", ".join(d) if d else "none (every class keeps the detector's "
                      "decision, score > 0: the CRF beat it on no class of its training buildings)"])
+    if c.get("always_kept"):
+        rows.append(["always kept (a space's own, whatever their score)", ", ".join(c["always_kept"])])
     rows += [["solve seconds per space, median", fmt_float(ss.get("median"), 3)],
              ["solve seconds per space, max", fmt_float(ss.get("max"), 3)]]
     status = c.get("status") or {}

@@ -112,8 +112,8 @@ def test_apply_crf_on_the_cluster_equals_space_by_space(client):
     assert 0 < report["solve_seconds"]["median"] <= report["solve_seconds"]["max"]
     assert 0 < len(kept) < len(flat)
     block = metrics_block(report)
-    assert set(block) == {"spaces", "solve_seconds", "status", "proposals", "kept", "decides"}
-    assert block["kept"] == len(kept) and len(block["decides"]) == 12
+    assert set(block) == {"spaces", "solve_seconds", "status", "proposals", "kept", "decides", "always_kept"}
+    assert block["kept"] == len(kept) and len(block["decides"]) == 12 and block["always_kept"] == ["ceiling", "floor"]
 
 
 def test_apply_crf_submits_the_largest_spaces_first_and_reports_by_space(client, monkeypatch):

@@ -22,7 +22,8 @@ METRICS = {
                   "map_before_crf": 0.4012, "iou": {c: 0.5 + 0.01 * i for i, c in enumerate(ELEMENT_CLASSES)},
                   "miou": 0.5512},
     "crf": {"spaces": 12, "solve_seconds": {"median": 0.0412, "max": 1.9},
-            "status": {"OPTIMAL": 11, "FEASIBLE": 1}, "proposals": 900, "kept": 412, "decides": ["wall", "door"]},
+            "status": {"OPTIMAL": 11, "FEASIBLE": 1}, "proposals": 900, "kept": 412, "decides": ["wall", "door"],
+            "always_kept": ["ceiling", "floor"]},
     "timings": {"ingest": 12.5, "spaces": 30.25, "detection": 100.0, "crf": 4.75},
     "elements": {"wall": 40, "chair": 35, "window": 5},
 }
@@ -113,6 +114,7 @@ def test_report_tables_match_metrics():
     assert crf["classes the CRF decides"][0] == "wall, door"
     none = rows(parse(render_report(dict(METRICS, crf=dict(METRICS["crf"], decides=[])))).tables["crf"])
     assert none["classes the CRF decides"][0].startswith("none")
+    assert crf["always kept (a space's own, whatever their score)"][0] == "ceiling, floor"
     status = rows(p.tables["crf-status"])
     assert {k: num(v[0]) for k, v in status.items() if k != "solver status"} == {"OPTIMAL": 11, "FEASIBLE": 1}
 
