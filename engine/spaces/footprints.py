@@ -5,9 +5,22 @@ from typing import Any
 
 import shapely
 from shapely import affinity
-from shapely.geometry import box, mapping
+from shapely.geometry import MultiPolygon, Polygon, box, mapping
 
 from engine.spaces.alignment import Frame
+
+
+def polygonal(geom: Any) -> Polygon | MultiPolygon:
+    """The polygonal part of a shapely geometry: a union or intersection of boxes returns, where boundaries only
+    touch, a GeometryCollection of its polygons and the points or lines where they touch, which a GeoPackage
+    layer of polygons does not allow and GIS tools do not draw; an empty Polygon when there is no area."""
+    if isinstance(geom, (Polygon, MultiPolygon)):
+        return geom
+    polys = [p for g in getattr(geom, "geoms", []) if isinstance(g, (Polygon, MultiPolygon))
+             for p in (g.geoms if isinstance(g, MultiPolygon) else [g]) if not p.is_empty]
+    if not polys:
+        return Polygon()
+    return polys[0] if len(polys) == 1 else MultiPolygon(polys)
 
 
 def union_footprint(rects: list[list[float]], frame: Frame) -> tuple[dict[str, Any], float]:
@@ -22,7 +35,7 @@ def union_footprint(rects: list[list[float]], frame: Frame) -> tuple[dict[str, A
     area = float(geom.area)
     c, s = frame.cos_sin
     world = affinity.affine_transform(geom, [c, -s, s, c, frame.origin[0], frame.origin[1]])
-    world = shapely.set_precision(world, 1e-4)
+    world = polygonal(shapely.set_precision(world, 1e-4))
     return mapping(world), area
 
 
@@ -33,7 +46,7 @@ def union_geojson(geoms: list[dict[str, Any]]) -> tuple[dict[str, Any], float]:
     shapes = [shape(g) for g in geoms if g.get("coordinates")]
     if not shapes:
         return {"type": "Polygon", "coordinates": []}, 0.0
-    world = shapely.set_precision(shapely.union_all(shapes), 1e-4)
+    world = polygonal(shapely.set_precision(shapely.union_all(shapes), 1e-4))
     return mapping(world), float(world.area)
 
 
@@ -51,5 +64,5 @@ def clipped_footprint(rects: list[list[float]], frame: Frame, clip_rects: list[l
 
     if not rects or not clip_rects:
         return {"type": "Polygon", "coordinates": []}, 0.0
-    geom = shapely.set_precision(world(rects, frame).intersection(world(clip_rects, clip_frame)), 1e-4)
+    geom = polygonal(shapely.set_precision(world(rects, frame).intersection(world(clip_rects, clip_frame)), 1e-4))
     return mapping(geom), float(geom.area)
