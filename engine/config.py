@@ -89,7 +89,7 @@ SETTINGS: dict[str, Any] = {
         "stride": "float in (0, 1]", "max-stride": "float > 0", "min-window-points": "int >= 0",
         "score-threshold": "float", "pre-nms": "int >= 1", "nms-iou": "float in [0, 1]",
         "nms-min-size": "float >= 0", "max-per-class": "int >= 1",
-        "one-per-space": "classes", "surface-choice": "one of extreme, halves, score",
+        "one-per-space": "classes", "one-per-space-always": "bool", "surface-choice": "one of extreme, halves, score",
         "local-search": "bool", "refine": "bool", "refine-classes": "classes", "thin-voxels": "int >= 0",
         "refine-bin": "float > 0",
         "reveal-classes": "classes", "reveal-thin-voxels": "int >= 0", "reveal-grow": "float >= 0",

@@ -4,7 +4,8 @@ Every window of the dictionary is scored over the space (:func:`window_candidate
 shape together), those above ``score-threshold`` are kept, at most ``pre-nms`` per window shape
 (:func:`top_windows`); per class (:func:`class_windows`), non-maximum suppression of the boxes grown to
 ``nms-min-size``, a half-step local search (:func:`local_search`), NMS again, at most ``max-per-class``, and
-the one ceiling and floor of ``one-per-space``.  Design notes: ``docs/design/detection.md``.
+the one ceiling and floor of ``one-per-space`` (every space gets both: ``one-per-space-always``).  Design notes:
+``docs/design/detection.md``.
 """
 from __future__ import annotations
 
@@ -36,25 +37,31 @@ def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSetting
         if c in wanted and model.trained[c]:
             shape = window_shape(atom.size_in(grid.extent), grid)
             groups.setdefault(tuple(int(v) for v in shape), []).append(ai)
+    always = {ELEMENT_CLASSES.index(c) for c in settings.one_per_space} if settings.one_per_space_always else set()
     out: dict[int, tuple[np.ndarray, ...]] = {}
     for shape, members in groups.items():
         w, b = model.window_weights(members)
+        # a class every space gets one of is scored everywhere: its best window may lie below the threshold
+        sure = any(model.dictionary.atoms_[ai].class_code in always for ai in members)
         scored = score_windows_many(vol, np.array(shape), w, b, model.layout, settings.stride,
-                                    settings.min_window_points, settings.max_stride, floor=settings.score_threshold)
+                                    settings.min_window_points, settings.max_stride,
+                                    floor=None if sure else settings.score_threshold)
         for ai, ws in zip(members, scored):
-            top = top_windows(ws, ai, settings)
+            top = top_windows(ws, ai, settings, -np.inf if model.dictionary.atoms_[ai].class_code in always else None)
             if top is not None:
                 out[ai] = top
     return out
 
 
-def top_windows(ws: WindowScores, atom: int, settings: DetectionSettings) -> tuple[np.ndarray, ...] | None:
-    """One window shape's scored positions above ``score-threshold``, at most ``pre-nms`` of the best.
+def top_windows(ws: WindowScores, atom: int, settings: DetectionSettings,
+                threshold: float | None = None) -> tuple[np.ndarray, ...] | None:
+    """One window shape's scored positions above ``threshold`` (None: ``score-threshold``), at most ``pre-nms``
+    of the best; positions without a score (too few points) never pass.
 
     Returns ``(lo, hi, score, atom index per window)``, or None when no window passes.
     """
     flat = ws.scores.ravel()
-    ok = np.nonzero(flat > settings.score_threshold)[0]
+    ok = np.nonzero((flat > (settings.score_threshold if threshold is None else threshold)) & np.isfinite(flat))[0]
     if len(ok) > settings.pre_nms:
         ok = ok[np.argpartition(-flat[ok], settings.pre_nms - 1)[:settings.pre_nms]]
     if not len(ok):
@@ -105,7 +112,8 @@ def class_windows(c: int, candidates: dict[int, tuple[np.ndarray, ...]], vol: Sp
                   settings: DetectionSettings) -> tuple[np.ndarray, ...] | None:
     """The detections of class ``c`` in a space from its atoms' ``candidates`` (:func:`window_candidates`'s).
 
-    NMS, local search and NMS again (``local-search``), then the one window of a ``one-per-space`` class.
+    NMS, local search and NMS again (``local-search``), then the one window of a ``one-per-space`` class
+    (with ``one-per-space-always``, the best of its windows below ``score-threshold`` when none is above it).
     Returns ``(lo, hi, score, class code, atom index)`` of the kept windows, or None without candidates.
     """
     grid = vol.grid
@@ -115,6 +123,10 @@ def class_windows(c: int, candidates: dict[int, tuple[np.ndarray, ...]], vol: Sp
         return None
     los, his, scs, ats = zip(*found)
     lo, hi, sc, at = np.concatenate(los), np.concatenate(his), np.concatenate(scs), np.concatenate(ats)
+    if ELEMENT_CLASSES[c] in settings.one_per_space:  # windows below the threshold only when none is above it
+        above = sc > settings.score_threshold
+        if above.any() and not above.all():
+            lo, hi, sc, at = lo[above], hi[above], sc[above], at[above]
     # NMS on boxes grown to nms-min-size: parallel slivers of one surface suppress each other
     pad = np.clip(np.ceil(settings.nms_min_size / grid.voxel) - (hi - lo), 0, None) / 2.0
     keep = non_maximum_suppression(lo - pad, hi + pad, sc, settings.nms_iou, settings.max_per_class)

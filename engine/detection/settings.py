@@ -27,6 +27,7 @@ class DetectionSettings:
     nms_min_size: float = 0.3
     max_per_class: int = 30
     one_per_space: tuple[str, ...] = ("ceiling", "floor")
+    one_per_space_always: bool = True
     surface_choice: str = "extreme"
     local_search: bool = True
     refine: bool = True

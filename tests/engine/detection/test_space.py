@@ -140,3 +140,27 @@ def _largest_space_and_wall_rescorer(buildings, trained, coef_row, bias: float):
     rescorer = rs.Rescorer(np.zeros((12, rs.N_FEATURES)), np.ones((12, rs.N_FEATURES)), coef, np.full(12, bias),
                            enabled)
     return load_space(store, ref, "gt_space"), dataclasses.replace(trained, rescorer=rescorer)
+
+
+def test_every_space_gets_its_ceiling_and_floor_whatever_their_score(buildings, trained):
+    """``one-per-space-always`` (the default): a space whose ceiling and floor windows all score below
+    ``score-threshold`` still gets its best window of each (its other classes stay below it); without it, none."""
+    from engine.detection.space import detect_space
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    usual = detect_space(pts, trained, DetectionSettings.from_config())
+    strict = DetectionSettings.from_config(score_threshold=50.0)  # no window of this model scores that high
+    assert strict.one_per_space_always
+    props = detect_space(pts, trained, strict)
+    assert sorted(p.class_code for p in props) == [CLASS_CODES["ceiling"], CLASS_CODES["floor"]]
+    assert all(p.score < 50.0 for p in props)
+    for c in ("ceiling", "floor"):  # the same window as when it passes the threshold
+        a = next(p for p in usual if p.class_code == CLASS_CODES[c])
+        b = next(p for p in props if p.class_code == CLASS_CODES[c])
+        np.testing.assert_allclose(b.center, a.center, atol=1e-6)
+    assert detect_space(pts, trained, DetectionSettings.from_config(score_threshold=50.0,
+                                                                     one_per_space_always=False)) == []
