@@ -264,10 +264,10 @@ def _crf_stage(ctx: RunContext, model, proposals: list, fp_det: str) -> tuple[li
     if seconds is None:
         logger.info("crf: %d elements (done before, skipped)", len(elements))
     else:
-        decided = report.get("decides")
+        decided, kept = report.get("decides"), report.get("always_kept") or []
         who = ("" if decided is None or len(decided) == len(ELEMENT_CLASSES) else
                f"; the CRF decides {', '.join(decided) if decided else 'no class'}, the others keep the "
-               "detector's decision (score > 0)")
+               "detector's decision (score > 0)") + (f"; {', '.join(kept)} always kept" if kept else "")
         logger.info("crf: kept %d of %d proposals%s (%.1f s)", len(elements), len(proposals), who, seconds)
     return elements, report, fp
 
