@@ -42,6 +42,7 @@ class DetectionSettings:
     planar_beside: float = 0.3
     planar_quantile: float = 0.005
     feature_points: int = 50_000
+    hanging_classes: tuple[str, ...] = ("beam",)
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -60,7 +61,7 @@ class DetectionSettings:
             raise ValueError(f"feature-points must be >= 0 (0: every point), got {self.feature_points}")
         if self.planar_depth <= 0 or self.planar_beside <= 0 or not 0 <= self.planar_quantile < 0.5:
             raise ValueError("planar-depth and planar-beside must be > 0, planar-quantile in [0, 0.5)")
-        for name in ("one_per_space", "refine_classes", "planar_classes"):
+        for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

@@ -100,7 +100,19 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)
         fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
                    settings.planar_beside, settings.planar_quantile, np.asarray(vol.frame.extent, float))
+    if settings.hanging_classes:  # a beam hangs from the ceiling: not one whose top is in the lower half
+        keep = ~fallen(cls_all, hi_m, float(vol.frame.extent[2]), settings.hanging_classes)
+        if not keep.all():
+            lo, hi, lo_m, hi_m, score, cls_all, at_all_cat = (a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all,
+                                                                                at_all_cat))
     return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat)
+
+
+def fallen(class_code: np.ndarray, hi_m: np.ndarray, height: float, hanging: tuple[str, ...]) -> np.ndarray:
+    """Which detections of the classes ``hanging`` (that hang from the ceiling) have their top (``hi_m[:, 2]``,
+    canonical metres from the space's floor) in the lower half of a space ``height`` metres high."""
+    codes = [ELEMENT_CLASSES.index(c) for c in hanging]
+    return np.isin(np.asarray(class_code), codes) & (np.asarray(hi_m)[:, 2] < 0.5 * height)
 
 
 def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,

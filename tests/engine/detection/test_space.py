@@ -164,3 +164,16 @@ def test_every_space_gets_its_ceiling_and_floor_whatever_their_score(buildings, 
         np.testing.assert_allclose(b.center, a.center, atol=1e-6)
     assert detect_space(pts, trained, DetectionSettings.from_config(score_threshold=50.0,
                                                                      one_per_space_always=False)) == []
+
+
+def test_a_beam_whose_top_is_in_the_lower_half_of_its_space_is_dropped():
+    """``hanging-classes`` (default: beams): a beam hangs from the ceiling; one lying on the floor is not one."""
+    from engine.detection.space import fallen
+
+    hanging = DetectionSettings.from_config().hanging_classes
+    assert hanging == ("beam",)
+    beam, table = CLASS_CODES["beam"], CLASS_CODES["table"]
+    hi = np.array([[1.0, 1.0, 0.34], [1.0, 1.0, 2.95], [1.0, 1.0, 0.75], [1.0, 1.0, 1.49]])
+    got = fallen(np.array([beam, beam, table, beam]), hi, 3.0, hanging)
+    assert got.tolist() == [True, False, False, True]
+    assert not fallen(np.array([beam]), hi[:1], 3.0, ()).any()
