@@ -93,8 +93,10 @@ def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
     bid = np.array([names.index(str(b)) for b in buildings])
     n_folds = min(FOLDS, len(names))
     fold = building_folds(bid, n_folds)
+    always = [ELEMENT_CLASSES.index(c) for c in settings.keep_classes]  # kept by both sets (crf.keep-classes)
     ap_set = set_ap(proposals_per_space, ground_truth_per_space,
-                    [np.array([p.score > 0 for p in props], dtype=bool) for props in proposals_per_space], iou)
+                    [np.array([p.score > 0 or p.class_code in always for p in props], dtype=bool)
+                     for props in proposals_per_space], iou)
     report.update(folds=n_folds, detector_set={c: _pct(a) for c, a in zip(ELEMENT_CLASSES, ap_set)}, candidates={})
     best: tuple[float, float, np.ndarray] | None = None
     for cost in costs:
@@ -111,7 +113,8 @@ def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
             for i, (mask, _, _) in zip(test, outs):
                 keep[i] = mask
         ap_crf = set_ap(proposals_per_space, ground_truth_per_space,
-                        [m if len(m) == len(p) else np.array([q.score > 0 for q in p], dtype=bool)
+                        [m if len(m) == len(p) else np.array([q.score > 0 or q.class_code in always for q in p],
+                                                             dtype=bool)
                          for m, p in zip(keep, proposals_per_space)], iou)
         decides = gate(ap_crf, ap_set)
         gated = np.where(decides, ap_crf, ap_set)

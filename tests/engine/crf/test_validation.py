@@ -112,3 +112,25 @@ def test_train_crf_with_buildings_fixes_the_undecided_classes(client):
     assert one["miss_cost"] == 2.0 and one["validation"]["folds"] == 0
     with pytest.raises(ValueError, match="building label"):
         train_crf(props, gts, buildings=blds[:1], **kw)
+
+
+def test_the_classes_always_kept_are_kept_by_the_detectors_set_too():
+    """A true ceiling the detector scored -5 is in both sets (``crf.keep-classes``): the CRF's kept set does
+    not beat the detector's own on ceilings for that alone, so it does not come to decide them."""
+    ceiling = CLASS_CODES["ceiling"]
+    props, gts, blds = _scenes(3)
+    for ps, g in zip(props, gts):
+        ps.append(world_prop(ceiling, [5, 5, 3], [10, 10, 0.05], -5.0, space=ps[0].space_id))
+        g.append(gt(ceiling, [5, 5, 3], [10, 10, 0.05]))
+    labels = [proposal_labels(p, g) for p, g in zip(props, gts)]
+
+    def fit(examples, init, cost):
+        return CRFWeights.new(init.grid, k=init.k.tolist()[0])
+
+    _, decides, report = choose(props, gts, labels, blds, [2.0], CRFWeights.new(K, k=2), fit,
+                                settings=CRFSettings(deterministic_time=5.0))
+    assert report["detector_set"]["ceiling"] == report["candidates"]["2"]["kept_set"]["ceiling"]
+    assert not decides[ceiling]
+    _, _, off = choose(props, gts, labels, blds, [2.0], CRFWeights.new(K, k=2), fit,
+                       settings=CRFSettings(deterministic_time=5.0, keep_classes=()))
+    assert off["detector_set"]["ceiling"] < report["detector_set"]["ceiling"]  # without the rule it loses them
