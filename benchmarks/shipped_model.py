@@ -11,7 +11,8 @@ Buildings are generated like the training ones (``engine.synth.generate`` with
 space is detected on its ground-truth points and scored with VOC AP at 3D IoU
 0.5 four ways: all proposals ranked by the detector's score, the detector's own
 set (score > 0), the set the CRF keeps, and all proposals ranked by the CRF's
-contextual score.  Not a ``bench_*`` suite: ``make bench`` does not run it.
+contextual score; under the table, the CRF's kept set per class against the elements (``kept/true``: issue 25
+item 5's counts).  Not a ``bench_*`` suite: ``make bench`` does not run it.
 
 ``--styles classic varied windows doors subsampled`` evaluates the held-out buildings in each style
 (``engine.synth`` ``styles``): seen when the model was trained on all its style families (its model JSON
@@ -172,6 +173,14 @@ def evaluate_foreign(model_path: str | None, folder: str) -> dict:
     return out
 
 
+def counts_line(ev: dict) -> str:
+    """Detections kept against elements per class (``kept/true``) of a :meth:`DetectionEvaluation.to_json` result:
+    issue 25 item 5's check that classes do not appear by the dozen where there are few or none."""
+    from tiles.classes import ELEMENT_CLASSES
+
+    return "kept/true: " + ", ".join(f"{c} {ev['n_det'].get(c, 0)}/{ev['n_gt'].get(c, 0)}" for c in ELEMENT_CLASSES)
+
+
 def main(argv: list[str] | None = None) -> int:
     from engine.metrics.detection import format_ap_table
 
@@ -199,6 +208,8 @@ def main(argv: list[str] | None = None) -> int:
         if len(args.styles) > 1:
             print(f"{styles} styles ({'seen' if set(style_families(styles)) <= seen else 'unseen'}):")
         print(format_ap_table([ev.to_json() for ev in res.values()], list(res)))
+        for name in [k for k in res if k.startswith("CRF, kept set")]:
+            print(counts_line(res[name].to_json()))
         print(f"{seconds:.0f} s")
         means[styles] = 100.0 * res["detector, ranked"].mean_ap
     for folder in args.foreign or []:
@@ -206,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
         name = os.path.basename(os.path.normpath(folder))
         print(f"foreign {name} (ground-truth spaces; difficult elements left out):")
         print(format_ap_table([ev.to_json() for ev in res.values()], list(res)))
+        if "CRF, kept set" in res:
+            print(counts_line(res["CRF, kept set"].to_json()))
     line = seen_unseen_line(means, seen)
     if line:
         print(line)

@@ -72,3 +72,15 @@ def test_seen_and_unseen_styles_follow_the_models_training_styles():
                             {"varied", "windows"})
     assert "seen styles 72.0 (classic, varied, windows), unseen 60.0 (subsampled), gap 12.0" in line
     assert seen_unseen_line({"classic": 80.0}, set()) == ""
+
+
+def test_the_counts_line_gives_kept_against_true_elements_per_class():
+    from benchmarks.shipped_model import counts_line
+    from engine.metrics.detection import DetectionEvaluation
+    from tiles.classes import ELEMENT_CLASSES
+
+    ev = DetectionEvaluation({c: 0.5 for c in ELEMENT_CLASSES}, {c: 0 for c in ELEMENT_CLASSES} | {"beam": 9},
+                             {c: 1 for c in ELEMENT_CLASSES} | {"beam": 285})
+    line = counts_line(ev.to_json())
+    assert line.startswith("kept/true: ceiling 1/0, floor 1/0") and "beam 285/9" in line
+    assert line.count("/") == len(ELEMENT_CLASSES) + 1  # the prefix's and one per class
