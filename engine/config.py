@@ -92,7 +92,7 @@ SETTINGS: dict[str, Any] = {
         "one-per-space": "classes", "one-per-space-always": "bool", "hanging-classes": "classes",
         "surface-choice": "one of extreme, halves, score",
         "local-search": "bool", "refine": "bool", "refine-classes": "classes", "thin-voxels": "int >= 0",
-        "refine-bin": "float > 0",
+        "refine-bin": "float > 0", "refine-band": "one of tightest, noise",
         "reveal-classes": "classes", "reveal-thin-voxels": "int >= 0", "reveal-grow": "float >= 0",
         "reveal-quantile": "float in [0, 0.5)", "solid-classes": "classes", "solid-edge": "float >= 0",
         "box-fit": "bool", "rescore": "bool", "label-margin": "float >= 0",

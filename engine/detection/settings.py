@@ -34,6 +34,7 @@ class DetectionSettings:
     refine_classes: tuple[str, ...] = ("ceiling", "floor", "wall")
     thin_voxels: int = 2
     refine_bin: float = 0.005
+    refine_band: str = "tightest"
     label_margin: float = 0.02
     box_fit: bool = True
     rescore: bool = True
@@ -55,6 +56,8 @@ class DetectionSettings:
             raise ValueError("max-per-class and pre-nms must be >= 1")
         if self.surface_choice not in SURFACE_CHOICES:
             raise ValueError(f"surface-choice must be one of {', '.join(SURFACE_CHOICES)}, got {self.surface_choice!r}")
+        if self.refine_band not in ("tightest", "noise"):
+            raise ValueError(f"refine-band must be one of tightest, noise, got {self.refine_band!r}")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
         if self.feature_points < 0:

@@ -202,6 +202,7 @@ class Space:
     footprint: np.ndarray | None = None
     density: float = 1.0
     noise: float = 0.004
+    noise_clip: float = 3.0  # the noise is clipped at this many sigmas (5: real scanners' tails, 3: the classic)
     brightness: float = 1.0
     voxel: float = 0.0  # the scan keeps one point per cell of a world grid this wide (m); 0: every point
     colours: dict[str, tuple[float, float, float]] = field(default_factory=dict)
@@ -230,8 +231,8 @@ class Space:
 
     @property
     def noise_bound(self) -> float:
-        """The largest displacement of a point from its surface (noise is clipped at 3 sigma)."""
-        return 3.0 * self.noise
+        """The largest displacement of a point from its surface (noise is clipped at ``noise_clip`` sigmas)."""
+        return self.noise_clip * self.noise
 
     def registered(self, local: np.ndarray) -> np.ndarray:
         """Local points ``(n, 3)`` moved by the space's registration error (unchanged without one)."""

@@ -95,14 +95,16 @@ SCAN_KEY = 1_000_000
 
 def vary_scan(space: Space, variety: int) -> None:
     """A room of a ``styles="varied"`` building, after its classic draws (which stay as they are): saturated
-    walls (a third of the rooms), a dark room (one in six), scan noise 1-10 mm and a density factor four times
-    as wide (x0.25-x4 in all), from the room's own variety stream."""
+    walls (a third of the rooms), a dark room (one in six), scan noise 1-10 mm with a real scanner's tails
+    (clipped at 5 sigma, not 3: a surface of 10^6 points spans about +- 4.9 sigma) and a density factor four
+    times as wide (x0.25-x4 in all), from the room's own variety stream."""
     r = np.random.default_rng([variety, int(space.id), SCAN_KEY])
     if r.random() < 1 / 3:
         space.colours["wall"] = space.colours["column"] = vivid(r)
     if r.random() < 1 / 6:
         space.brightness = float(r.uniform(0.25, 0.45))
     space.noise = float(math.exp(r.uniform(math.log(0.001), math.log(0.010))))
+    space.noise_clip = 5.0
     space.density *= float(math.exp(r.uniform(math.log(0.5), math.log(2.0))))
 
 

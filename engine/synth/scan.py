@@ -13,8 +13,8 @@ Per part (:class:`engine.synth.building.PartSpec`), all numpy over whole arrays:
    hide a voxel's points if it is near the segment from the scanner to the
    voxel).  So there is no floor under a bookcase, no wall behind it, no back
    face of anything, and the floor under a table shows only between its legs.
-3. *Noise* along the surface normal (sigma per space, clipped at 3 sigma, so no
-   point ever goes deeper than 3 sigma into a wall), *colour* from the surface's
+3. *Noise* along the surface normal (sigma per space, clipped at `noise_clip` sigmas: 3, or 5 in a varied
+   room; no point goes deeper than that into a wall), *colour* from the surface's
    base colour with jitter, the space's brightness and a distance fall-off.
 4. The building's frame maps the points to world coordinates.
 """
@@ -112,7 +112,8 @@ def scan_job(job: ScanJob) -> dict[str, np.ndarray]:
     P, S, first = P[keep], S[keep], first[keep]
     n = len(P)
     sigma = sp.noise
-    P += normals[S] * np.clip(rng.standard_normal(n, dtype=np.float32) * sigma, -3 * sigma, 3 * sigma)[:, None]
+    bound = sp.noise_bound
+    P += normals[S] * np.clip(rng.standard_normal(n, dtype=np.float32) * sigma, -bound, bound)[:, None]
     dist = np.sqrt(np.sum((P - scanners[0]) ** 2, axis=1))  # light falls off from the part's nearest scanner
     rgb = shade(rng, base[S], jit[S], sp.brightness, dist)
     el = elem[S]

@@ -24,3 +24,13 @@ def test_feature_points_setting():
     assert DetectionSettings(feature_points=0).feature_points == 0  # every point
     with pytest.raises(ValueError, match="feature-points"):
         DetectionSettings(feature_points=-1)
+
+
+def test_refine_band_setting():
+    from engine.detection.surfaces import REFINE_BANDS
+
+    assert DetectionSettings.from_config().refine_band == "tightest"  # the tightest box of a surface's points
+    assert REFINE_BANDS["tightest"] is None and REFINE_BANDS["noise"] == 3.0
+    assert DetectionSettings(refine_band="noise").to_json()["refine_band"] == "noise"
+    with pytest.raises(ValueError, match="refine-band"):
+        DetectionSettings(refine_band="3")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.detection.surfaces import refine_extent, surface_order, surface_shift
+from engine.detection.surfaces import expected_extreme, refine_extent, surface_order, surface_shift
 
 
 def test_surface_shift_moves_a_thin_box_onto_the_surface_beside_it():
@@ -32,6 +32,10 @@ def test_refine_extent_is_the_noise_band_of_the_surface():
     lo, hi = refine_extent(np.concatenate([wall, stray]), 1.2, 1.3, 0.005)
     assert abs((lo + hi) / 2 - 1.234) < 0.002
     assert 5 * sigma < hi - lo < 7 * sigma  # +- 3 sigma: the band holding the surface's points
+    # tightest: the span the surface's own points have (S3DIS's box), still without the strays
+    lo, hi = refine_extent(np.concatenate([wall, stray]), 1.2, 1.3, 0.005, sigmas=None)
+    assert abs((hi - lo) - np.ptp(wall)) < 0.5 * sigma
+    assert hi < 1.25
     # a noise-free plane still gets a box (one bin), and no points leave the box as it was
     lo, hi = refine_extent(np.full(50, 1.234), 1.2, 1.3, 0.005)
     assert lo < 1.234 < hi and 0.002 < hi - lo <= 0.005
@@ -57,3 +61,11 @@ def test_a_spaces_one_ceiling_is_its_highest_window_and_its_floor_its_lowest():
     ties = np.array([2, 1])  # same height: the better score first
     lo[1], hi[1] = lo[2], hi[2]
     assert surface_order(ties, lo, hi, 30, upper=True).tolist() == [2, 1]
+
+
+def test_expected_extreme_is_the_mean_largest_of_n_normals():
+    rng = np.random.default_rng(2)
+    for n in (30, 1000, 20000):
+        mean_max = rng.normal(size=(200, n)).max(axis=1).mean()
+        assert abs(expected_extreme(n) - mean_max) < 0.1
+    assert expected_extreme(0) == expected_extreme(1) == 1.0
