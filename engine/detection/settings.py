@@ -12,6 +12,9 @@ from tiles.classes import element_class_list
 
 #: How a space's one ceiling and floor are chosen among their windows (:func:`engine.detection.surfaces.surface_order`).
 SURFACE_CHOICES = ("extreme", "halves", "score")
+#: ``refine-band``: the sigmas of a thin surface's box (:func:`engine.detection.surfaces.refine_extent`; None: the
+#: tightest box of its points).
+REFINE_BANDS: dict[str, float | None] = {"tightest": None, "noise": 3.0}
 
 
 @dataclass
@@ -56,8 +59,8 @@ class DetectionSettings:
             raise ValueError("max-per-class and pre-nms must be >= 1")
         if self.surface_choice not in SURFACE_CHOICES:
             raise ValueError(f"surface-choice must be one of {', '.join(SURFACE_CHOICES)}, got {self.surface_choice!r}")
-        if self.refine_band not in ("tightest", "noise"):
-            raise ValueError(f"refine-band must be one of tightest, noise, got {self.refine_band!r}")
+        if self.refine_band not in REFINE_BANDS:
+            raise ValueError(f"refine-band must be one of {', '.join(REFINE_BANDS)}, got {self.refine_band!r}")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
         if self.feature_points < 0:

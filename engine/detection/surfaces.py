@@ -14,12 +14,10 @@ from scipy.special import ndtri
 
 from engine.detection import moments as mom
 from engine.detection.pointindex import PointIndex
-from engine.detection.settings import DetectionSettings
+from engine.detection.settings import REFINE_BANDS, DetectionSettings
 from tiles.classes import ELEMENT_CLASSES
 
 CEILING, FLOOR = ELEMENT_CLASSES.index("ceiling"), ELEMENT_CLASSES.index("floor")
-#: ``refine-band``: the sigmas of :func:`refine_extent` (None: the tightest box of the surface's points).
-REFINE_BANDS: dict[str, float | None] = {"tightest": None, "noise": 3.0}
 
 
 def expected_extreme(n: int) -> float:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from engine.detection.settings import DetectionSettings
+from engine.detection.settings import REFINE_BANDS, DetectionSettings
 
 
 def test_one_per_space_and_refine_classes_settings():
@@ -27,8 +27,6 @@ def test_feature_points_setting():
 
 
 def test_refine_band_setting():
-    from engine.detection.surfaces import REFINE_BANDS
-
     assert DetectionSettings.from_config().refine_band == "tightest"  # the tightest box of a surface's points
     assert REFINE_BANDS["tightest"] is None and REFINE_BANDS["noise"] == 3.0
     assert DetectionSettings(refine_band="noise").to_json()["refine_band"] == "noise"
