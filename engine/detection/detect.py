@@ -7,14 +7,19 @@ Settings: ``buildingparser.detection.*`` (``engine/detection/detection.yaml``).
 """
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from engine.detection.model import Model, load_model
 from engine.detection.proposals import Proposal
 from engine.detection.settings import DetectionSettings
 from engine.detection.space import detect_space
+from engine.detection.sparse import sparse_spaces
 from engine.spaces.points import SpaceRef, index_spaces, load_space
 from tiles.tasks import run_tasks
+
+logger = logging.getLogger(__name__)
 
 
 def connection_hints(store, space_array: str = "space_id") -> dict[int, np.ndarray]:
@@ -46,6 +51,19 @@ def connection_hints(store, space_array: str = "space_id") -> dict[int, np.ndarr
 def by_size(refs: list[SpaceRef]) -> list[SpaceRef]:
     """Spaces in the order their tasks should start: most points first (ties by id), the longest tasks first."""
     return sorted(refs, key=lambda r: (-r.count, r.space_id))
+
+
+def without_sparse(refs: list[SpaceRef], doc: dict | None, ratio: float) -> list[SpaceRef]:
+    """``refs`` without the spaces too sparse to be scanned rooms (:mod:`engine.detection.sparse`), logged."""
+    sparse = sparse_spaces(doc, ratio)
+    if not sparse:
+        return refs
+    kept = [r for r in refs if r.space_id not in sparse]
+    skipped = [r for r in refs if r.space_id in sparse]
+    logger.info("detection: %d of %d spaces (%d points) hold under %g of the typical space's points per m2 of "
+                "floor: too sparse to be scanned rooms, no elements detected in them", len(skipped), len(refs),
+                sum(r.count for r in skipped), ratio)
+    return kept
 
 
 def _detect_task(job: tuple[SpaceRef, np.ndarray | None], store, model: Model, space_array: str,
@@ -81,6 +99,8 @@ def detect(store, *, model: Model | str | None = None, client=None, space_array:
         model = load_model(model)
     settings = settings or DetectionSettings.from_config()
     refs = index_spaces(store, space_array, client=client)
+    if space_array == "space_id":
+        refs = without_sparse(refs, store.doc("spaces"), settings.min_space_density)
     hints = connection_hints(store, space_array)
     if client is not None and refs:
         [model_arg] = client.scatter([model], broadcast=True)

@@ -47,6 +47,7 @@ class DetectionSettings:
     planar_quantile: float = 0.005
     feature_points: int = 50_000
     hanging_classes: tuple[str, ...] = ("beam",)
+    min_space_density: float = 0.1
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -63,6 +64,8 @@ class DetectionSettings:
             raise ValueError(f"refine-band must be one of {', '.join(REFINE_BANDS)}, got {self.refine_band!r}")
         if self.refine_bin <= 0 or self.thin_voxels < 0 or self.label_margin < 0:
             raise ValueError("refine-bin must be > 0, thin-voxels and label-margin >= 0")
+        if not 0 <= self.min_space_density < 1:
+            raise ValueError(f"min-space-density must be in [0, 1), got {self.min_space_density}")
         if self.feature_points < 0:
             raise ValueError(f"feature-points must be >= 0 (0: every point), got {self.feature_points}")
         if self.planar_depth <= 0 or self.planar_beside <= 0 or not 0 <= self.planar_quantile < 0.5:
