@@ -68,6 +68,14 @@ def file_sha256(path: str, storage_options: dict[str, Any] | None = None) -> tup
     return size, digest.hexdigest()
 
 
+def present_size(fs: Any, path: str) -> int | None:
+    """The size of a file in bytes, None when it no longer exists."""
+    try:
+        return int(fs.size(path) or 0)
+    except FileNotFoundError:
+        return None
+
+
 def input_identity(input: str, storage_options: dict[str, Any] | None = None, *,
                    is_store: bool = False) -> dict[str, Any]:
     """``name``, ``size`` (bytes), ``sha256`` (None for a tile store) and ``files`` (a folder's count)."""
@@ -77,9 +85,11 @@ def input_identity(input: str, storage_options: dict[str, Any] | None = None, *,
         size, sha = file_sha256(input, storage_options)
         return {"name": name, "size": size, "sha256": sha}
     files = sorted(f for f in fs.find(p) if not fs.isdir(f))
+    if is_store:  # the run writes into it meanwhile: a file listed may be gone (an array rewritten) when sized
+        sizes = [present_size(fs, f) for f in files]
+        kept = [n for n in sizes if n is not None]
+        return {"name": name, "size": sum(kept), "sha256": None, "files": len(kept)}
     total = sum(int(fs.size(f) or 0) for f in files)
-    if is_store:
-        return {"name": name, "size": total, "sha256": None, "files": len(files)}
     digest = hashlib.sha256()  # over "<relative path> <sha256>\n" lines, as sha256sum lists them
     for f in files:
         rel = f[len(p.rstrip("/")) + 1:]

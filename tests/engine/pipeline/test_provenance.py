@@ -40,6 +40,26 @@ def test_a_folder_is_summed_over_its_files_and_a_store_is_not_hashed(tmp_path):
     assert input_identity(str(area), is_store=True)["sha256"] is None
 
 
+def test_a_store_rewritten_while_it_is_sized_is_no_error(tmp_path, monkeypatch):
+    """A run writes into a tile store given as its input while the checksum thread lists it: a file listed
+    and then rewritten (gone when sized) is left out, not an error (it lost the run its input's identity)."""
+    import fsspec.implementations.local as local
+
+    store = tmp_path / "b.zarr"
+    (store / "tiles" / "t_0_0").mkdir(parents=True)
+    (store / "zarr.json").write_text("{}")
+    (store / "tiles" / "t_0_0" / "space_id").write_text("1234")
+    real = local.LocalFileSystem.size
+
+    def vanishing(self, path):
+        if path.endswith("space_id"):
+            raise FileNotFoundError(path)
+        return real(self, path)
+
+    monkeypatch.setattr(local.LocalFileSystem, "size", vanishing)
+    assert input_identity(str(store), is_store=True) == {"name": "b.zarr", "size": 2, "sha256": None, "files": 1}
+
+
 def test_model_identity_names_the_shipped_model_and_checksums_its_files():
     from engine.detection.model import default_model_path
 
