@@ -48,6 +48,10 @@ class DetectionSettings:
     feature_points: int = 50_000
     hanging_classes: tuple[str, ...] = ("beam",)
     min_space_density: float = 0.1
+    top_classes: tuple[str, ...] = ("bookcase",)
+    top_reach: float = 0.6
+    opening_classes: tuple[str, ...] = ("window",)
+    opening_grow: float = 1.5
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -70,7 +74,12 @@ class DetectionSettings:
             raise ValueError(f"feature-points must be >= 0 (0: every point), got {self.feature_points}")
         if self.planar_depth <= 0 or self.planar_beside <= 0 or not 0 <= self.planar_quantile < 0.5:
             raise ValueError("planar-depth and planar-beside must be > 0, planar-quantile in [0, 0.5)")
-        for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes"):
+        if self.opening_grow < 0:
+            raise ValueError(f"opening-grow must be >= 0, got {self.opening_grow}")
+        if self.top_reach < 0:
+            raise ValueError(f"top-reach must be >= 0, got {self.top_reach}")
+        for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes", "top_classes",
+                     "opening_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

@@ -18,12 +18,14 @@ from engine.detection import moments as mom
 from engine.detection.candidates import class_windows, window_candidates
 from engine.detection.canonical import CanonicalFrame, estimate_frame
 from engine.detection.model import Model
+from engine.detection.openings import fit_openings
 from engine.detection.planar import fit_planar
 from engine.detection.pointindex import PointIndex
 from engine.detection.proposals import Proposal
 from engine.detection.reveal import refine_reveals
 from engine.detection.settings import DetectionSettings
 from engine.detection.surfaces import refine_surfaces
+from engine.detection.tops import fit_tops
 from engine.detection.volume import SpaceVolume
 from engine.spaces.points import SpacePoints
 from tiles.classes import ELEMENT_CLASSES
@@ -100,6 +102,12 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)
         fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
                    settings.planar_beside, settings.planar_quantile, np.asarray(vol.frame.extent, float))
+    if settings.refine and index is not None and settings.opening_classes:  # windows as their openings
+        fit_openings(lo_m, hi_m, cls_all, index.points_in_metric, settings.opening_classes, settings.opening_grow,
+                     np.asarray(vol.frame.extent, float))
+    if settings.refine and index is not None and settings.top_classes:  # bookcases as tall as their points
+        fit_tops(lo_m, hi_m, cls_all, index.points_in_metric, settings.top_classes, settings.top_reach,
+                 np.asarray(vol.frame.extent, float))
     if settings.hanging_classes:  # a beam hangs from the ceiling: not one whose top is in the lower half
         keep = ~fallen(cls_all, hi_m, float(vol.frame.extent[2]), settings.hanging_classes)
         if not keep.all():

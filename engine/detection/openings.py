@@ -1,0 +1,114 @@
+"""The width and height of a window fitted to its opening in the wall's face.
+
+A window detection's width and height are those of its sliding window, moved by the learned box fit: sizes of
+the training buildings' windows.  Ribbon windows five metres wide, narrow full-height ones and windows of another
+catalogue get a box of a training window's size at their place, which caps their IoU far below 0.5.  The wall
+shows where the window is: its room-side face has points everywhere but in its openings, where the points (frame,
+glass) lie deeper in the reveal.  Where the face is hidden (a desk under the window) there are no points at all,
+which is no opening.
+
+Along the detection's thin horizontal axis (the wall's normal) the face is the densest 1 cm bin of the points in
+the box grown by :data:`DEPTH` metres, searched ``opening-grow`` metres beyond the box's sides and
+:data:`VERTICAL` metres above and below it.  In a grid of :data:`CELL` cells of the wall's plane, a cell with a
+point within :data:`FACE` of the face is wall; one without, but with a point deeper than that (away from the
+room), is open.  The connected open region that covers most
+of the detection's box is the opening, and the box takes its width and height, side by side, unless the region
+reaches the edge of the search there (it runs on: the wall is not seen, or the opening is not a window).  A
+region covering under :data:`MIN_SHARE` of the box leaves it as it is.  Settings:
+``buildingparser.detection.opening-*``.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from scipy import ndimage
+
+from tiles.classes import ELEMENT_CLASSES
+
+#: Metres the box grows along the wall's normal, so that the wall's face is in it.
+DEPTH = 0.1
+#: Metres searched above and below the box.
+VERTICAL = 0.6
+#: Cell of the wall's plane (metres).
+CELL = 0.05
+#: A point within this many metres of the face's plane makes its cell wall.
+FACE = 0.03
+#: The least share of the detection's cells the opening covers.
+MIN_SHARE = 0.3
+#: Points a fit needs.
+MIN_POINTS = 50
+
+
+def fit_openings(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
+                 points_in_metric: Callable[[np.ndarray, np.ndarray], np.ndarray], classes: tuple[str, ...],
+                 grow: float, extent: np.ndarray) -> None:
+    """Set in place the width and height (canonical metres) of the detections of ``classes`` to their opening's
+    (see the module doc); ``extent``: the space's size in canonical metres."""
+    codes = [ELEMENT_CLASSES.index(c) for c in classes]
+    ext = np.asarray(extent, dtype=np.float64)
+    for i in np.nonzero(np.isin(np.asarray(class_code), codes))[0]:
+        a = 0 if hi_m[i, 0] - lo_m[i, 0] <= hi_m[i, 1] - lo_m[i, 1] else 1  # the wall's normal
+        b = 1 - a
+        rlo, rhi = lo_m[i].copy(), hi_m[i].copy()
+        rlo[a], rhi[a] = rlo[a] - DEPTH, rhi[a] + DEPTH
+        rlo[b], rhi[b] = rlo[b] - grow, rhi[b] + grow
+        rlo[2], rhi[2] = rlo[2] - VERTICAL, rhi[2] + VERTICAL
+        rlo, rhi = np.maximum(rlo, 0.0), np.minimum(rhi, ext)
+        p = points_in_metric(rlo, rhi)
+        p = p[np.all((p >= rlo) & (p <= rhi), axis=1)]
+        if len(p) < MIN_POINTS:
+            continue
+        behind = -1 if 0.5 * (lo_m[i, a] + hi_m[i, a]) < 0.5 * ext[a] else 1  # the room is on the other side
+        found = opening_box(p[:, a], behind, p[:, b], p[:, 2], (rlo[b], rhi[b]), (rlo[2], rhi[2]),
+                            (lo_m[i, b], hi_m[i, b]), (lo_m[i, 2], hi_m[i, 2]), (0.0, ext[b]), (0.0, ext[2]))
+        if found is None:
+            continue
+        (b0, b1), (z0, z1) = found
+        lo_m[i, b], hi_m[i, b], lo_m[i, 2], hi_m[i, 2] = b0, b1, z0, z1
+
+
+def opening_box(depth: np.ndarray, behind: int, u: np.ndarray, z: np.ndarray, u_range: tuple[float, float],
+                z_range: tuple[float, float], box_u: tuple[float, float], box_z: tuple[float, float],
+                space_u: tuple[float, float], space_z: tuple[float, float]
+                ) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """The opening's ``(u0, u1), (z0, z1)`` in the wall's plane (a side that reaches the search's edge, short of
+    the space's, keeps the box's), or None; ``behind`` (-1 or +1): the direction of ``depth`` away from the room;
+    the other arguments as :func:`fit_openings` finds them."""
+    hist, edges = np.histogram(depth, bins=max(1, int(np.ceil((depth.max() - depth.min()) / 0.01))))
+    k = int(np.argmax(hist))
+    face = 0.5 * (edges[k] + edges[k + 1])
+    nu = max(1, int(np.ceil((u_range[1] - u_range[0]) / CELL)))
+    nz = max(1, int(np.ceil((z_range[1] - z_range[0]) / CELL)))
+    iu = np.clip(((u - u_range[0]) / CELL).astype(np.int64), 0, nu - 1)
+    iz = np.clip(((z - z_range[0]) / CELL).astype(np.int64), 0, nz - 1)
+    near = np.abs(depth - face) <= FACE
+    wall = np.zeros((nu, nz), dtype=bool)
+    wall[iu[near], iz[near]] = True
+    deeper = (face - depth if behind < 0 else depth - face) > FACE  # in the reveal, away from the room
+    seen = np.zeros((nu, nz), dtype=bool)
+    seen[iu[deeper], iz[deeper]] = True
+    labels, count = ndimage.label(seen & ~wall)
+    if count == 0:
+        return None
+    cu = slice(int(np.clip((box_u[0] - u_range[0]) // CELL, 0, nu - 1)), int(np.clip(-(-(box_u[1] - u_range[0]) // CELL), 1, nu)))
+    cz = slice(int(np.clip((box_z[0] - z_range[0]) // CELL, 0, nz - 1)), int(np.clip(-(-(box_z[1] - z_range[0]) // CELL), 1, nz)))
+    inside = labels[cu, cz]
+    hits = np.bincount(inside.ravel(), minlength=count + 1)
+    hits[0] = 0
+    best = int(np.argmax(hits))
+    if best == 0 or hits[best] < MIN_SHARE * inside.size:
+        return None
+    su, sz = ndimage.find_objects((labels == best).astype(np.int32))[0]
+    u0, u1 = u_range[0] + su.start * CELL, u_range[0] + su.stop * CELL
+    z0, z1 = z_range[0] + sz.start * CELL, z_range[0] + sz.stop * CELL
+    # a side at the edge of the search (not the space's) runs on: keep the box's there
+    if su.start == 0 and u_range[0] > space_u[0] + 1e-9:
+        u0 = box_u[0]
+    if su.stop == nu and u_range[1] < space_u[1] - 1e-9:
+        u1 = box_u[1]
+    if sz.start == 0 and z_range[0] > space_z[0] + 1e-9:
+        z0 = box_z[0]
+    if sz.stop == nz and z_range[1] < space_z[1] - 1e-9:
+        z1 = box_z[1]
+    return (u0, u1), (z0, z1)

@@ -1,0 +1,72 @@
+"""A window's width and height fitted to its opening in the wall's face (engine/detection/openings.py)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.detection.openings import fit_openings
+from engine.detection.settings import DetectionSettings
+from tiles.classes import ELEMENT_CLASSES
+
+WINDOW = ELEMENT_CLASSES.index("window")
+EXTENT = np.array([8.0, 5.0, 3.0])
+
+
+def _wall_with_window(rng, u0, u1, z0, z1, n=60000):
+    """The wall of an 8 x 3 m room, its room-side face at y = 0.35 (the space's frame holds the wall's reveal),
+    scanned from the room, with a window opening u0-u1, z0-z1 whose glass is 0.15 m deep in the reveal."""
+    face = rng.uniform([0.0, 0.347, 0.0], [8.0, 0.353, 3.0], (n, 3))
+    hole = (face[:, 0] > u0) & (face[:, 0] < u1) & (face[:, 2] > z0) & (face[:, 2] < z1)
+    glass = rng.uniform([u0, 0.198, z0], [u1, 0.202, z1], (int(hole.sum() // 2), 3))
+    floor = rng.uniform([0.0, 0.0, 0.0], [8.0, 5.0, 0.003], (n, 3))
+    return np.concatenate([face[~hole], glass, floor])
+
+
+def _query(points):
+    return lambda lo, hi: points[np.all((points >= np.asarray(lo) - 0.1) & (points <= np.asarray(hi) + 0.1), axis=1)]
+
+
+def test_a_window_box_takes_the_size_of_its_opening():
+    rng = np.random.default_rng(0)
+    pts = _wall_with_window(rng, 2.0, 5.2, 0.9, 2.1)  # a 3.2 m ribbon window
+    # the detector's box: a training window's size, 1.5 x 1.4 m, at its place
+    lo, hi = np.array([[2.8, 0.05, 0.8]]), np.array([[4.3, 0.37, 2.2]])
+    fit_openings(lo, hi, np.array([WINDOW]), _query(pts), ("window",), 1.5, EXTENT)
+    assert np.allclose([lo[0, 0], hi[0, 0], lo[0, 2], hi[0, 2]], [2.0, 5.2, 0.9, 2.1], atol=0.06)
+    assert lo[0, 1] == 0.05 and hi[0, 1] == 0.37  # the depth is left as it is
+
+
+def test_no_opening_under_the_box_or_one_that_runs_on_leaves_it():
+    rng = np.random.default_rng(1)
+    solid = _wall_with_window(rng, 0.0, 0.0, 0.0, 0.0)  # no window
+    lo, hi = np.array([[2.8, 0.05, 0.8]]), np.array([[4.3, 0.37, 2.2]])
+    fit_openings(lo, hi, np.array([WINDOW]), _query(solid), ("window",), 1.5, EXTENT)
+    assert np.allclose(lo, [[2.8, 0.05, 0.8]]) and np.allclose(hi, [[4.3, 0.37, 2.2]])
+    # an opening wider than the search along the wall: those sides stay; the top and bottom are found
+    wide = _wall_with_window(rng, 0.5, 7.5, 0.9, 2.1)
+    lo, hi = np.array([[3.0, 0.05, 0.8]]), np.array([[4.5, 0.37, 2.2]])
+    fit_openings(lo, hi, np.array([WINDOW]), _query(wide), ("window",), 1.0, EXTENT)
+    assert np.allclose([lo[0, 0], hi[0, 0]], [3.0, 4.5]) and np.allclose([lo[0, 2], hi[0, 2]], [0.9, 2.1], atol=0.06)
+    # other classes are left alone
+    lo, hi = np.array([[2.8, 0.05, 0.8]]), np.array([[4.3, 0.37, 2.2]])
+    fit_openings(lo, hi, np.array([ELEMENT_CLASSES.index("door")]), _query(wide), ("window",), 1.5, EXTENT)
+    assert np.allclose(hi, [[4.3, 0.37, 2.2]])
+
+
+def test_a_face_hidden_by_furniture_is_no_opening():
+    rng = np.random.default_rng(2)
+    pts = _wall_with_window(rng, 2.0, 5.2, 0.9, 2.1)
+    # a desk under the window hides the face from 0.3 to 0.75 m: no point there, its top in front of the wall
+    hidden = (pts[:, 1] > 0.3) & (pts[:, 0] > 1.5) & (pts[:, 0] < 5.7) & (pts[:, 2] > 0.3) & (pts[:, 2] < 0.75)
+    desk = rng.uniform([1.5, 0.5, 0.74], [5.7, 1.1, 0.76], (5000, 3))
+    pts = np.concatenate([pts[~hidden], desk])
+    lo, hi = np.array([[2.8, 0.05, 0.6]]), np.array([[4.3, 0.37, 2.2]])
+    fit_openings(lo, hi, np.array([WINDOW]), _query(pts), ("window",), 1.5, EXTENT)
+    assert np.allclose([lo[0, 0], hi[0, 0], lo[0, 2], hi[0, 2]], [2.0, 5.2, 0.9, 2.1], atol=0.06)
+
+
+def test_opening_settings():
+    assert DetectionSettings.from_config().opening_classes == ("window",)
+    assert DetectionSettings.from_config(opening_classes="").opening_classes == ()
+    with pytest.raises(ValueError, match="opening-grow"):
+        DetectionSettings(opening_grow=-1.0)
