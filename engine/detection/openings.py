@@ -11,11 +11,10 @@ Along the detection's thin horizontal axis (the wall's normal) the face is the d
 the box grown by :data:`DEPTH` metres, searched ``opening-grow`` metres beyond the box's sides and
 :data:`VERTICAL` metres above and below it.  In a grid of :data:`CELL` cells of the wall's plane, a cell with a
 point within :data:`FACE` of the face is wall; one without, but with a point deeper than that (away from the
-room), is open.  The connected open region that covers most
-of the detection's box is the opening, and the box takes its width and height, side by side, unless the region
-reaches the edge of the search there (it runs on: the wall is not seen, or the opening is not a window).  A
-region covering under :data:`MIN_SHARE` of the box leaves it as it is.  Settings:
-``buildingparser.detection.opening-*``.
+room), is open.  The connected open region that covers most of the detection's box is the opening, and the box
+takes its width and height, side by side, unless the region reaches the edge of the search there (it runs on:
+the wall is not seen, or the opening is not a window).  A region covering under :data:`MIN_SHARE` of the box
+leaves it as it is.  Settings: ``buildingparser.detection.opening-*``.
 """
 from __future__ import annotations
 
@@ -68,6 +67,12 @@ def fit_openings(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
         lo_m[i, b], hi_m[i, b], lo_m[i, 2], hi_m[i, 2] = b0, b1, z0, z1
 
 
+def cells(span: tuple[float, float], origin: float, n: int) -> slice:
+    """The :data:`CELL` cells from ``origin`` that ``span`` touches, within ``n`` cells (at least one)."""
+    first = int(np.clip((span[0] - origin) // CELL, 0, n - 1))
+    return slice(first, int(np.clip(-(-(span[1] - origin) // CELL), first + 1, n)))
+
+
 def opening_box(depth: np.ndarray, behind: int, u: np.ndarray, z: np.ndarray, u_range: tuple[float, float],
                 z_range: tuple[float, float], box_u: tuple[float, float], box_z: tuple[float, float],
                 space_u: tuple[float, float], space_z: tuple[float, float]
@@ -91,9 +96,7 @@ def opening_box(depth: np.ndarray, behind: int, u: np.ndarray, z: np.ndarray, u_
     labels, count = ndimage.label(seen & ~wall)
     if count == 0:
         return None
-    cu = slice(int(np.clip((box_u[0] - u_range[0]) // CELL, 0, nu - 1)), int(np.clip(-(-(box_u[1] - u_range[0]) // CELL), 1, nu)))
-    cz = slice(int(np.clip((box_z[0] - z_range[0]) // CELL, 0, nz - 1)), int(np.clip(-(-(box_z[1] - z_range[0]) // CELL), 1, nz)))
-    inside = labels[cu, cz]
+    inside = labels[cells(box_u, u_range[0], nu), cells(box_z, z_range[0], nz)]
     hits = np.bincount(inside.ravel(), minlength=count + 1)
     hits[0] = 0
     best = int(np.argmax(hits))

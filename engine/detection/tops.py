@@ -37,13 +37,10 @@ def run_tops(cell: np.ndarray, z: np.ndarray, start: float) -> dict[int, tuple[f
         return {}
     first = np.r_[True, cell[1:] != cell[:-1]]
     breaks = np.r_[(np.diff(z) > GAP) | first[1:], True]  # the last point of a run
-    out: dict[int, tuple[float, float]] = {}
     starts = np.flatnonzero(first)
     ends = np.flatnonzero(breaks)
-    for s in starts:
-        e = ends[np.searchsorted(ends, s)]  # the first run's end within the column
-        out[int(cell[s])] = (float(z[s]), float(z[e]))
-    return out
+    ends = ends[np.searchsorted(ends, starts)]  # each column's first run ends there
+    return {int(c): (float(a), float(b)) for c, a, b in zip(cell[starts], z[starts], z[ends])}
 
 
 def fit_tops(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
