@@ -96,6 +96,7 @@ SETTINGS: dict[str, Any] = {
         "reveal-classes": "classes", "reveal-thin-voxels": "int >= 0", "reveal-grow": "float >= 0",
         "reveal-quantile": "float in [0, 0.5)", "solid-classes": "classes", "solid-edge": "float >= 0",
         "box-fit": "bool", "rescore": "bool", "label-margin": "float >= 0",
+        "label-occupied": "bool", "label-first": "classes",
         "planar-classes": "classes", "planar-depth": "float > 0", "planar-beside": "float > 0",
         "planar-quantile": "float in [0, 0.5)", "feature-points": "int >= 0",
         "min-space-density": "float in [0, 1)", "top-classes": "classes", "top-reach": "float >= 0",

@@ -1,10 +1,15 @@
 """From detections to per-point labels and ``elements.json`` (paper section 5.3, "points" granularity).
 
-A point takes the class and element id of the highest-scoring detection whose
-*voxelised box* holds it: the box (world centre, size, yaw) cut into K x K x K
-sub-boxes of which only the occupied ones (the proposal's pattern ``B``) count,
-each grown by ``label-margin`` metres (scan noise).  Points in no detection are
-clutter (12) with element id -1.  One task per tile writes ``classification``
+A point takes the class and element id of the first detection whose box (world
+centre, size, yaw), grown by ``label-margin`` metres (scan noise), holds it; the
+detections of the ``label-first`` classes (ceilings and floors: their boxes are
+their surfaces' thin tightest boxes, and the floor under a table is the floor's)
+come first, then the others by decreasing score.  With ``label-occupied`` only
+the occupied cells of the box cut into K x K x K (the proposal's pattern ``B``,
+its window's in the dictionary) count: the rule before 2026-12-05, which left
+the parts of an element its window's pattern lacks as clutter
+(docs/experiments/detection.md, "Point labels from whole boxes").  Points in no
+detection are clutter (12) with element id -1.  One task per tile writes ``classification``
 (uint8) and ``element_id`` (int32); only the detections whose bounds meet the
 tile are sent to it.
 """
@@ -20,14 +25,15 @@ import numpy as np
 from engine import config
 from engine.detection.proposals import Proposal
 from tiles import paths
-from tiles.classes import CLUTTER
+from tiles.classes import CLUTTER, ELEMENT_CLASSES, element_class_list
 from tiles.schema import RESULT_NONE, Dimension
 from tiles.tasks import run_tasks
 
 
-def _boxes(elements: Sequence[Proposal]) -> dict[str, np.ndarray]:
+def _boxes(elements: Sequence[Proposal], occupied: bool = True) -> dict[str, np.ndarray]:
+    """The detections as arrays for :func:`label_arrays`; without ``occupied`` every cell of a box counts."""
     n = len(elements)
-    k = max((np.asarray(e.occupancy).shape[0] for e in elements), default=1)
+    k = max((np.asarray(e.occupancy).shape[0] for e in elements), default=1) if occupied else 1
     out = {"center": np.zeros((n, 3)), "size": np.zeros((n, 3)), "yaw": np.zeros(n), "score": np.zeros(n),
            "cls": np.zeros(n, np.uint8), "eid": np.zeros(n, np.int32), "space": np.zeros(n, np.int64),
            "occ": np.ones((n, k, k, k), bool)}
@@ -36,6 +42,8 @@ def _boxes(elements: Sequence[Proposal]) -> dict[str, np.ndarray]:
         out["space"][i] = e.space_id
         out["score"][i], out["cls"][i], out["eid"][i] = e.score, e.class_code, e.element_id
         occ = np.asarray(e.occupancy, dtype=bool)
+        if not occupied:
+            continue
         if occ.shape == (k, k, k):
             out["occ"][i] = occ
         elif occ.size:  # another K: nearest-cell resampling
@@ -137,12 +145,15 @@ def _contains(p: np.ndarray, i: np.ndarray, boxes: dict[str, np.ndarray], bounds
 
 
 def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *,
-                 space: np.ndarray | None = None, cell: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+                 space: np.ndarray | None = None, cell: float = 0.25,
+                 first: Sequence[int] = ()) -> tuple[np.ndarray, np.ndarray]:
     """Class (uint8) and element id (int32) per point of ``xyz`` (world) from detection boxes.
 
-    A point takes the class and element id of the highest-scoring box whose
-    occupied sub-boxes (grown by ``margin``) hold it; of boxes with equal scores,
-    the first in ``boxes`` order; boxes scored NaN or -inf label nothing.
+    A point takes the class and element id of the first box whose occupied
+    sub-boxes (grown by ``margin``) hold it: the boxes of the classes ``first``
+    (codes) before the others, each group by decreasing score; of boxes with
+    equal scores, the first in ``boxes`` order; boxes scored NaN or -inf label
+    nothing.
 
     The boxes are bucketed into a grid of ``cell`` metres (coarsened when the
     boxes are many and large) and each point is tested only against the boxes
@@ -169,7 +180,8 @@ def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *
     score = np.asarray(boxes["score"], dtype=np.float64)
     if not len(score) or not n:
         return cls, eid
-    order = np.argsort(-score, kind="stable")
+    ahead = np.isin(np.asarray(boxes["cls"]), np.asarray(list(first), dtype=np.int64))
+    order = np.lexsort((-score, ~ahead))  # stable: equal keys keep the boxes' order
     order = order[score[order] > -np.inf]  # NaN and -inf never beat the initial -inf
     if not len(order):
         return cls, eid
@@ -213,12 +225,13 @@ def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *
     return cls, eid
 
 
-def _label_tile(job: tuple[str, dict[str, np.ndarray]], store: Any, margin: float, space_array: str | None) -> int:
+def _label_tile(job: tuple[str, dict[str, np.ndarray]], store: Any, margin: float, space_array: str | None,
+                first: tuple[int, ...] = ()) -> int:
     tile, boxes = job
     origin = np.asarray(store.meta.origin, dtype=np.float64)
     xyz = store.xyz(tile) + origin
     space = store.read(tile, [space_array])[space_array] if space_array else None
-    cls, eid = label_arrays(xyz, boxes, margin, space=space)
+    cls, eid = label_arrays(xyz, boxes, margin, space=space, first=first)
     store.write_array(tile, "classification", cls)
     store.write_array(tile, "element_id", eid)
     return int((cls != CLUTTER).sum())
@@ -232,19 +245,32 @@ def result_dimensions() -> list[Dimension]:
                       {"name": "element_id", "type": "int32", "description": "detected element id"})]
 
 
+def label_rule() -> dict[str, Any]:
+    """The labelling settings (``buildingparser.detection.label-*``): ``margin``, ``occupied``, ``first`` (names)."""
+    return {"margin": float(config.setting("detection.label-margin")),
+            "occupied": bool(config.setting("detection.label-occupied")),
+            "first": list(element_class_list(config.setting("detection.label-first"), "detection.label-first"))}
+
+
 def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margin: float | None = None,
-                 own_space: str | None = None) -> int:
+                 own_space: str | None = None, occupied: bool | None = None,
+                 first: Sequence[str] | None = None) -> int:
     """Write per-point ``classification`` and ``element_id`` in every tile from the detections.
 
     ``own_space`` names a per-point space array (``"space_id"``, whose ids the
     elements' ``space_id`` follow): a detection then labels only the points of its
     own space (the far face of a wall belongs to the room behind it).  None (the
-    default): a detection labels every point its occupied sub-boxes hold.
+    default): a detection labels every point its box holds.  ``margin``,
+    ``occupied`` (only the occupied sub-boxes count) and ``first`` (the classes
+    whose boxes come before the others) default to :func:`label_rule`'s.
 
     Returns the number of points labelled with an element class.
     """
-    margin = float(config.setting("detection.label-margin") if margin is None else margin)
-    boxes = _boxes(list(elements))
+    rule = label_rule()
+    margin = float(rule["margin"] if margin is None else margin)
+    occupied = rule["occupied"] if occupied is None else bool(occupied)
+    codes = tuple(ELEMENT_CLASSES.index(c) for c in (rule["first"] if first is None else first))
+    boxes = _boxes(list(elements), occupied)
     bounds = _world_bounds(boxes, margin)
     items, subsets = [], []
     for t in sorted(store.tiles, key=lambda t: -t.count):  # largest first: no long task left alone at the end
@@ -253,7 +279,7 @@ def label_points(store: Any, elements: Sequence[Proposal], *, client=None, margi
         items.append(t.name)
         subsets.append({k: v[meet] for k, v in boxes.items()})
     counts = run_tasks(_label_tile, list(zip(items, subsets)),
-                       client=client, label="label points", keys=items, extra_args=(store, margin, own_space))
+                       client=client, label="label points", keys=items, extra_args=(store, margin, own_space, codes))
     store.add_dimensions(result_dimensions())
     return int(sum(counts))
 

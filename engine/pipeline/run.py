@@ -297,9 +297,9 @@ def _update_stage(ctx: RunContext, parsed, elements: list, fp_crf: str):
 
 def _labels_stage(ctx: RunContext, elements: list, fp_crf: str, fp_update: str) -> str:
     """Per-point classification and element_id; returns the stage's fingerprint."""
-    from engine.outputs.labels import label_points
+    from engine.outputs.labels import label_points, label_rule
 
-    fp = fingerprint("labels", None, fp_crf, fp_update)  # the update's merges reconcile the elements
+    fp = fingerprint("labels", label_rule(), fp_crf, fp_update)  # the update's merges reconcile the elements
     _, seconds = ctx.stage("labels", fp, lambda: label_points(ctx.store, elements, client=ctx.client),
                            load=lambda: True)
     if seconds is not None:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 
+import dask
 import numpy as np
 
 from engine.cli import main
@@ -99,6 +100,16 @@ def test_labels_and_elements_json(buildings, trained, client, tmp_path):
     assert np.all((eid == -1) == (cls == 12)) and eid.max() < len(props)
     for c in ("floor", "ceiling"):  # most floor / ceiling points are labelled so
         assert np.mean(cls[gtc == CLASS_CODES[c]] == CLASS_CODES[c]) > 0.8
+    # the rule before 2026-12-05 (occupied cells only, by score alone) labels fewer of them so
+    with dask.config.set({"buildingparser.detection.label-first": "", "buildingparser.detection.label-occupied": True}):
+        label_points(store, props, client=client)
+    store.refresh()
+    old = np.concatenate([store.read(t, ["classification"])["classification"] for t in store.tiles])
+    label_points(store, props, client=client)  # the default rule again, for the tests after this one
+    store.refresh()
+    assert not np.array_equal(old, cls)
+    for c in ("floor", "ceiling"):
+        assert np.mean(cls[gtc == CLASS_CODES[c]] == CLASS_CODES[c]) >= np.mean(old[gtc == CLASS_CODES[c]] == CLASS_CODES[c])
     path = write_elements_json(props, tmp_path / "out" / "elements.json")
     recs = read_elements_json(path)
     assert len(recs) == len(props)

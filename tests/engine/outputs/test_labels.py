@@ -1,4 +1,4 @@
-"""Point labels from voxelised detection boxes, and the elements.json records."""
+"""Point labels from detection boxes (whole or voxelised, some classes first), and the elements.json records."""
 from __future__ import annotations
 
 import json
@@ -53,19 +53,24 @@ def test_elements_json_records(tmp_path):
 
 # -- the bucketed implementation against a brute-force reference ---------------------------------
 
-def _reference(xyz, boxes, margin, space=None):
-    """Every box in turn (best score first, ties in input order) against every point."""
+def _reference(xyz, boxes, margin, space=None, first=()):
+    """Every box in turn (the ``first`` classes' boxes, then the others; each group best score first, ties in
+    input order) against every point; a point keeps the first box that holds it."""
     from engine.outputs.labels import _world_bounds
 
     n = len(xyz)
     cls = np.full(n, 12, np.uint8)
     eid = np.full(n, -1, np.int32)
-    best = np.full(n, -np.inf)
+    taken = np.zeros(n, bool)
     if not len(boxes["score"]):
         return cls, eid
     bounds = _world_bounds(boxes, margin)
     k = boxes["occ"].shape[1]
-    for i in np.argsort(-boxes["score"], kind="stable"):
+    ahead = [i for i in np.argsort(-boxes["score"], kind="stable") if boxes["cls"][i] in first]
+    rest = [i for i in np.argsort(-boxes["score"], kind="stable") if boxes["cls"][i] not in first]
+    for i in ahead + rest:
+        if not boxes["score"][i] > -np.inf:
+            continue
         lo, hi = bounds[i, :3], bounds[i, 3:]
         in_bounds = np.all((xyz >= lo) & (xyz <= hi), axis=1)
         c, s = np.cos(boxes["yaw"][i]), np.sin(boxes["yaw"][i])
@@ -76,16 +81,16 @@ def _reference(xyz, boxes, margin, space=None):
         inside = np.all((rel >= -margin) & (rel <= size + margin), axis=1)
         cell = np.clip(np.floor(rel / size * k).astype(np.int64), 0, k - 1)
         occ = boxes["occ"][i][cell[:, 0], cell[:, 1], cell[:, 2]]
-        take = in_bounds & inside & occ & (boxes["score"][i] > best)
+        take = in_bounds & inside & occ & ~taken
         if space is not None:
             take &= space == boxes["space"][i]
-        best[take] = boxes["score"][i]
+        taken |= take
         cls[take] = boxes["cls"][i]
         eid[take] = boxes["eid"][i]
     return cls, eid
 
 
-def _random_case(seed, n_boxes=40, n_points=3000, k=4):
+def _random_case(seed, n_boxes=40, n_points=3000, k=4, occupied=True):
     rng = np.random.default_rng(seed)
     props = []
     scores = np.round(rng.uniform(-1, 1, n_boxes), 1)  # one decimal: many exact ties
@@ -101,7 +106,7 @@ def _random_case(seed, n_boxes=40, n_points=3000, k=4):
         pts[rng.integers(0, n_points)] = p.center + p.world_size / 2
         pts[rng.integers(0, n_points)] = p.center - p.world_size / 2
     pts[:50] = np.round(pts[:50] * 2) / 2
-    return pts, _boxes(props), rng.integers(0, 3, n_points)
+    return pts, _boxes(props, occupied), rng.integers(0, 3, n_points)
 
 
 def test_bucketed_labels_equal_the_brute_force_rule():
@@ -174,3 +179,56 @@ def test_own_space_restricts_a_box_to_the_points_of_its_space():
     xyz = np.array([[-0.1, 0, 1], [0.1, 0, 1]])
     assert label_arrays(xyz, _boxes([wall]), 0.02)[1].tolist() == [0, 0]
     assert label_arrays(xyz, _boxes([wall]), 0.02, space=np.array([1, 2]))[1].tolist() == [0, -1]
+
+
+def test_first_classes_label_before_better_scored_boxes():
+    # a table standing on the floor: its box reaches down into the floor's thin box
+    props = [_prop(0, 1, 0.2, [0, 0, 0], [4, 4, 0.02]),  # floor, scored below the table
+             _prop(1, 7, 0.9, [0, 0, 0.375], [1, 1, 0.75])]  # table, from the floor up
+    pts = np.array([[0.1, 0.1, 0.005], [0.1, 0.1, 0.5], [1.5, 1.5, 0.0]])
+    assert label_arrays(pts, _boxes(props), 0.02)[0].tolist() == [7, 7, 1]
+    assert label_arrays(pts, _boxes(props), 0.02, first=(1,))[0].tolist() == [1, 7, 1]
+    assert label_arrays(pts, _boxes(props), 0.02, first=(0,))[0].tolist() == [7, 7, 1]  # no ceiling here
+
+
+def test_first_classes_against_the_brute_force_rule():
+    differs = []
+    for seed in range(6):
+        pts, boxes, space = _random_case(seed, k=2 + seed % 3)
+        for first in ((0, 1), (2,), tuple(range(12))):
+            got = label_arrays(pts, boxes, 0.02, first=first)
+            want = _reference(pts, boxes, 0.02, first=first)
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), (seed, first)
+            got = label_arrays(pts, boxes, 0.02, space=space, first=first)
+            want = _reference(pts, boxes, 0.02, space=space, first=first)
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1]), (seed, first)
+        differs.append(not np.array_equal(label_arrays(pts, boxes, 0.02, first=(2,))[1], label_arrays(pts, boxes, 0.02)[1]))
+    assert sum(differs) >= 3  # the rule changes labels where boxes of class 2 overlap better ones
+
+
+def test_whole_boxes_label_the_cells_their_pattern_leaves_out():
+    half = np.zeros((2, 2, 2), bool)
+    half[:, :, 0] = True
+    props = [_prop(0, 7, 0.9, [0, 0, 1], [2, 2, 2], occ=half)]
+    pts = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 1.5]])
+    assert label_arrays(pts, _boxes(props), 0.02)[0].tolist() == [7, 12]
+    whole = _boxes(props, occupied=False)
+    assert whole["occ"].shape == (1, 1, 1, 1) and whole["occ"].all()
+    assert label_arrays(pts, whole, 0.02)[0].tolist() == [7, 7]
+    pts, boxes, _ = _random_case(7, occupied=False)
+    got, want = label_arrays(pts, boxes, 0.02), _reference(pts, boxes, 0.02)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def test_label_rule_reads_the_settings():
+    import dask
+    import pytest
+
+    from engine.outputs.labels import label_rule
+    from tiles.errors import SettingsError
+
+    assert label_rule() == {"margin": 0.02, "occupied": False, "first": ["ceiling", "floor"]}
+    with dask.config.set({"buildingparser.detection.label-first": "floor", "buildingparser.detection.label-occupied": True}):
+        assert label_rule() == {"margin": 0.02, "occupied": True, "first": ["floor"]}
+    with dask.config.set({"buildingparser.detection.label-first": "floor,roof"}), pytest.raises(SettingsError, match="label-first"):
+        label_rule()
