@@ -45,6 +45,8 @@ class DetectionSettings:
     planar_depth: float = 0.15
     planar_beside: float = 0.3
     planar_quantile: float = 0.005
+    face_classes: tuple[str, ...] = ("board",)
+    face_grow: float = 1.0
     feature_points: int = 50_000
     hanging_classes: tuple[str, ...] = ("beam",)
     min_space_density: float = 0.1
@@ -78,8 +80,10 @@ class DetectionSettings:
             raise ValueError(f"opening-grow must be >= 0, got {self.opening_grow}")
         if self.top_reach < 0:
             raise ValueError(f"top-reach must be >= 0, got {self.top_reach}")
+        if self.face_grow < 0:
+            raise ValueError(f"face-grow must be >= 0, got {self.face_grow}")
         for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes", "top_classes",
-                     "opening_classes"):
+                     "opening_classes", "face_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

@@ -17,6 +17,7 @@ import numpy as np
 from engine.detection import moments as mom
 from engine.detection.candidates import class_windows, window_candidates
 from engine.detection.canonical import CanonicalFrame, estimate_frame
+from engine.detection.faces import fit_faces
 from engine.detection.model import Model
 from engine.detection.openings import fit_openings
 from engine.detection.planar import fit_planar
@@ -102,6 +103,9 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)
         fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
                    settings.planar_beside, settings.planar_quantile, np.asarray(vol.frame.extent, float))
+    if settings.refine and index is not None and settings.face_classes:  # boards as wide and tall as their face
+        fit_faces(lo_m, hi_m, cls_all, index.points_in_metric, settings.face_classes, settings.face_grow,
+                  np.asarray(vol.frame.extent, float))
     if settings.refine and index is not None and settings.opening_classes:  # windows as their openings
         fit_openings(lo_m, hi_m, cls_all, index.points_in_metric, settings.opening_classes, settings.opening_grow,
                      np.asarray(vol.frame.extent, float))
