@@ -41,9 +41,9 @@ def _boxes(elements: Sequence[Proposal], occupied: bool = True) -> dict[str, np.
         out["center"][i], out["size"][i], out["yaw"][i] = e.center, e.world_size, e.yaw
         out["space"][i] = e.space_id
         out["score"][i], out["cls"][i], out["eid"][i] = e.score, e.class_code, e.element_id
-        occ = np.asarray(e.occupancy, dtype=bool)
-        if not occupied:
+        if not occupied:  # every cell counts: the ones already set
             continue
+        occ = np.asarray(e.occupancy, dtype=bool)
         if occ.shape == (k, k, k):
             out["occ"][i] = occ
         elif occ.size:  # another K: nearest-cell resampling
