@@ -173,50 +173,56 @@ def assign_levels(q: np.ndarray, index: np.ndarray, group_level: int, cap: int, 
     its cell holds more than ``cap`` of the group's points (all of the cloud's
     in that cell) and it is above the deepest level.  The points are sorted once
     by Morton code at the finest level: every node and every sampling cell is
-    then a run, and each level costs a few passes, no sort.
+    then a run.  Each level works on the points still without a level only (a
+    node's count is two binary searches in the sorted codes), so the deep
+    levels cost what is left of the group, not the group.
     """
     n = len(q)
     code = morton(q, BITS)
-    srt = np.argsort(code, kind="stable")
-    code, q, index = code[srt], q[srt], np.asarray(index)[srt]
+    srt = np.argsort(code)  # ties (points of one finest cell) in any order: the choice does not depend on it
+    code = code[srt]
     level = np.full(n, -1, dtype=np.int8)
-    alive = np.ones(n, dtype=bool)
+    pos = np.arange(n)  # the points without a level yet, as positions in the sorted arrays (ascending)
+    cells = [np.ascontiguousarray(q[srt, i]) for i in range(3)]
+    at = np.asarray(index, dtype=np.int64)[srt]
     for d in range(cube.depth + 1):
-        rem = np.flatnonzero(alive)
-        if not len(rem):
+        if not len(pos):
             break
         if d < group_level or d == cube.depth:
-            sampled = np.full(len(rem), d < group_level)
+            sampled = np.full(len(pos), d < group_level)
         else:
-            run_id, counts = _runs(code >> (3 * (BITS - d)))
-            sampled = counts[run_id[rem]] > cap
-        level[rem[~sampled]] = d
-        alive[rem[~sampled]] = False
-        rest = rem[sampled]
-        if len(rest):
-            chosen = rest[_nearest_per_cell(code[rest], q[rest], index[rest], BITS - d - cube.grid_bits)]
-            level[chosen] = d
-            alive[chosen] = False
+            shift = 3 * (BITS - d)
+            node = code[pos] >> shift
+            first = np.flatnonzero(np.r_[True, node[1:] != node[:-1]])
+            lo = node[first] << shift  # a node's codes are lo .. lo + 2**shift - 1 (no overflow at level 1)
+            count = np.searchsorted(code, lo + ((1 << shift) - 1), side="right") - np.searchsorted(code, lo)
+            sampled = np.repeat(count > cap, np.diff(np.r_[first, len(node)]))
+        level[pos[~sampled]] = d
+        pos = pos[sampled]
+        if len(pos):
+            chosen = _nearest_per_cell(code[pos], [c[pos] for c in cells], at[pos], BITS - d - cube.grid_bits)
+            level[pos[chosen]] = d
+            pos = np.delete(pos, chosen)
     out = np.empty(n, dtype=np.int8)
     out[srt] = level
     return out
 
 
-def _runs(sorted_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The run number of every element of sorted keys, and the length of every run."""
-    new = np.r_[True, sorted_keys[1:] != sorted_keys[:-1]] if len(sorted_keys) else np.zeros(0, bool)
-    run_id = np.cumsum(new) - 1
-    return run_id, np.bincount(run_id, minlength=int(run_id[-1]) + 1 if len(run_id) else 0)
-
-
-def _nearest_per_cell(code: np.ndarray, q: np.ndarray, index: np.ndarray, fine: int) -> np.ndarray:
-    """Positions of the chosen point of each sampling cell (cells of ``fine`` bits of ``q``; ``code`` sorted):
-    the one nearest the cell centre, ties to the smallest ``index``."""
+def _nearest_per_cell(code: np.ndarray, q: list[np.ndarray], index: np.ndarray, fine: int) -> np.ndarray:
+    """Positions of the chosen point of each sampling cell (cells of ``fine`` bits of ``q``, its three axes;
+    ``code`` sorted): the one nearest the cell centre, ties to the smallest ``index``."""
     cell = code >> (3 * fine)
-    off = 2 * (q & ((1 << fine) - 1)) + 1 - (1 << fine)  # twice the offset from the cell centre
-    dist = np.sum(off * off, axis=1)
+    dist = np.zeros(len(cell), dtype=np.int64)
+    for axis in q:
+        off = 2 * (axis & ((1 << fine) - 1)) + 1 - (1 << fine)  # twice the offset from the cell centre
+        dist += off * off
     seg = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
     sizes = np.diff(np.r_[seg, len(cell)])
+    low = int(index.min()) if len(index) else 0
+    span = int(index.max()) - low + 1 if len(index) else 1
+    if int(dist.max(initial=0)) < (1 << 62) // span:  # distance and index as one key: one reduction
+        key = dist * span + (index - low)
+        return np.flatnonzero(key == np.repeat(np.minimum.reduceat(key, seg), sizes))
     nearest = dist == np.repeat(np.minimum.reduceat(dist, seg), sizes)
     idx = np.where(nearest, index, np.iinfo(np.int64).max)
     return np.flatnonzero(nearest & (index == np.repeat(np.minimum.reduceat(idx, seg), sizes)))

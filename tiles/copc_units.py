@@ -22,7 +22,7 @@ import numpy as np
 from tiles import paths
 from tiles.copc_octree import BITS, Cube, Group, assign_levels, morton, node_order, point_cells
 from tiles.export_header import UnitStats, unit_stats
-from tiles.export_layout import Layout, pack_part
+from tiles.export_layout import Layout, join_records, pack_part, take_records
 from tiles.export_units import read_range, write_bytes
 from tiles.schema import TileInfo
 from tiles.store import TileStore
@@ -47,7 +47,7 @@ def stage_tile(tile: TileInfo, store: TileStore, layout: Layout, scratch: str,
         order = np.argsort(codes.astype(np.int32), kind="stable")
     else:
         order = np.lexsort((index, codes))
-    records = pack_part(cols, layout)[order]
+    records = take_records(pack_part(cols, layout), order)
     write_bytes(paths.join(scratch, f"{tile.name}.rec"), records, store.storage_options)
     write_bytes(paths.join(scratch, f"{tile.name}.idx"), index[order], store.storage_options)
     sc = codes[order]
@@ -71,13 +71,13 @@ def _read_rows(prefix: str, runs: list[tuple[str, int, int]], dtype: np.dtype,
     size = dtype.itemsize
     recs, idx = [], []
     for name, start, stop in runs:
-        raw = read_range(paths.join(prefix, f"{name}.rec"), start * size, (stop - start) * size, storage_options)
-        recs.append(np.frombuffer(raw, dtype=dtype))
+        recs.append(read_range(paths.join(prefix, f"{name}.rec"), start * size, (stop - start) * size,
+                               storage_options))
         raw = read_range(paths.join(prefix, f"{name}.idx"), start * 8, (stop - start) * 8, storage_options)
         idx.append(np.frombuffer(raw, dtype=np.int64))
     if not recs:
         return np.zeros(0, dtype=dtype), np.zeros(0, np.int64)
-    return np.concatenate(recs), np.concatenate(idx)
+    return join_records(recs, dtype), np.concatenate(idx)
 
 
 def compress_chunks(arr: np.ndarray, starts: np.ndarray, point_format_id: int,
@@ -120,7 +120,7 @@ def build_group(job: tuple[int, Group, list[tuple[str, int, int]]], layout: Layo
     if top.any():
         t = np.flatnonzero(top)
         t = t[np.lexsort((index[t], level[t]))]
-        write_bytes(paths.join(scratch, f"group-{k}.rec"), arr[t], storage_options)
+        write_bytes(paths.join(scratch, f"group-{k}.rec"), take_records(arr, t), storage_options)
         write_bytes(paths.join(scratch, f"group-{k}.idx"), index[t], storage_options)
         lv = level[t]
         for d in range(group.level):
@@ -129,7 +129,7 @@ def build_group(job: tuple[int, Group, list[tuple[str, int, int]]], layout: Layo
                 shares.append((d, int(a), int(b - a)))
     inside = np.flatnonzero(~top)
     order, starts, keys = node_order(q[inside], level[inside], index[inside])
-    recs = arr[inside[order]]
+    recs = take_records(arr, inside[order])
     stats = unit_stats(recs, pf, tracked)
     if not len(recs):
         return b"", [], stats, shares
@@ -147,6 +147,6 @@ def build_top(job: tuple[NodeKey, list[tuple[int, int, int]]], layout: Layout, s
     pf = layout.point_format_obj()
     arr, index = _read_rows(scratch, [(f"group-{g}", a, a + n) for g, a, n in shares], pf.dtype(), storage_options)
     order = np.argsort(index, kind="stable")
-    recs = arr[order]
+    recs = take_records(arr, order)
     data, table = compress_chunks(recs, np.zeros(1, np.int64), pf.id, pf.num_extra_bytes)
     return data, [(key, table[0][0], table[0][1])], unit_stats(recs, pf, tracked), []

@@ -25,7 +25,7 @@ from tiles import paths
 from tiles.config import setting
 from tiles.errors import UserError
 from tiles.export_header import UnitStats, unit_stats
-from tiles.export_layout import Layout, pack_part
+from tiles.export_layout import Layout, pack_part, take_records
 from tiles.schema import TileInfo
 from tiles.store import TileStore
 from tiles.tasks import Progress, run_tasks
@@ -77,7 +77,7 @@ def pack_tile(tile: TileInfo, store: TileStore, layout: Layout, scratch: str, un
     records = pack_part(cols, layout)
     if len(index) > 1 and not np.all(index[1:] > index[:-1]):
         order = np.argsort(index, kind="stable")
-        index, records = index[order], records[order]
+        index, records = index[order], take_records(records, order)
     write_bytes(paths.join(scratch, f"{tile.name}.rec"), records, store.storage_options)
     write_bytes(paths.join(scratch, f"{tile.name}.idx"), index, store.storage_options)
     units = -(-store.meta.point_count // unit)

@@ -65,3 +65,16 @@ def test_groups_cover_every_point_once_within_their_budget():
     assert all(g.count <= 100 or g.level == 3 for g in groups)
     spans = sorted((g.lo, g.hi) for g in groups)
     assert all(a[1] <= b[0] for a, b in zip(spans, spans[1:]))  # disjoint Morton ranges
+
+
+def test_levels_are_the_same_when_indices_span_too_far_for_one_key():
+    """Distance and index share one int64 key when they fit; far-apart indices take the two-step choice."""
+    rng = np.random.default_rng(3)
+    cube = Cube((0.0, 0.0, 0.0), 1.0, grid_bits=2)
+    q = rng.integers(0, 1 << BITS, (3000, 3))
+    q[:1000] = (1 << 19) + rng.integers(0, 1 << 10, (1000, 3))
+    index = rng.choice(1 << 20, 3000, replace=False).astype(np.int64)
+    far = index * (1 << 40)  # the same order of indices, too far apart to share a key with a distance
+    got = assign_levels(q, index, 1, 40, cube)
+    np.testing.assert_array_equal(got, _reference_levels(q, index, 1, 40, cube))
+    np.testing.assert_array_equal(assign_levels(q, far, 1, 40, cube), got)

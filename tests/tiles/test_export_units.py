@@ -39,3 +39,17 @@ def test_a_missing_duplicated_or_foreign_index_is_refused(tmp_path):
     for name in "abc":
         with pytest.raises(RuntimeError, match="export unit 0"):
             unit_records((0, 0, 4, [(name, 0, 4)]), DTYPE, str(tmp_path), None)
+
+
+def test_records_gathered_and_joined_as_bytes_equal_numpys_field_by_field_results():
+    from tiles.export_layout import join_records, take_records
+
+    rng = np.random.default_rng(5)
+    recs = np.zeros(500, np.dtype([("X", "<i4"), ("code", "u1"), ("extra", "<f8")]))  # packed: 13-byte records
+    recs["X"], recs["code"], recs["extra"] = rng.integers(-9, 9, 500), rng.integers(0, 255, 500), rng.random(500)
+    order = rng.permutation(500)[:300]
+    got = take_records(recs, order)
+    assert got.dtype == recs.dtype and got.tobytes() == recs[order].tobytes()
+    joined = join_records([recs[:10], recs[10:200].tobytes(), recs[200:]], recs.dtype)
+    assert joined.dtype == recs.dtype and joined.tobytes() == recs.tobytes()
+    assert join_records([], recs.dtype).dtype == recs.dtype
