@@ -169,12 +169,19 @@ def _std_column(store_name: str, lname: str, subs: dict[str, tuple[str, int]]) -
     return Column(store_name, "field", lname)
 
 
+#: Bytes of records packed at a time by :func:`pack_part`: every field of a block is written while the block is in
+#: the cache (a field written over a whole tile streams all of its records through memory once per field).
+PACK_BLOCK_BYTES = 1 << 20
+
+
 def pack_part(cols: dict[str, np.ndarray], layout: Layout) -> np.ndarray:
     """LAS point records (a structured array of the layout's point format) from a part's columns."""
     pf = layout.point_format_obj()
     n = len(cols["x"])
     arr = np.zeros(n, dtype=pf.dtype())
-    arr["X"], arr["Y"], arr["Z"] = cols["x"], cols["y"], cols["z"]
+    # (target, values, or into the field, component), in the layout's order, every value converted whole
+    ops: list[tuple[str, np.ndarray, bool, int | None]] = [("X", cols["x"], False, None), ("Y", cols["y"], False, None),
+                                                          ("Z", cols["z"], False, None)]
     for c in layout.columns:
         v = cols[c.store]
         if c.scale_colour:
@@ -188,11 +195,19 @@ def pack_part(cols: dict[str, np.ndarray], layout: Layout) -> np.ndarray:
             if len(v) and (v.min() < 0 or v.max() > top):
                 raise UserError(None, f"{c.store} values up to {int(v.max())} do not fit the {top.bit_length()}-bit "
                                       f"LAS field of point format {layout.point_format}: export to a format >= 6")
-            arr[c.target] |= (v.astype(np.uint8) << bit_shift(c.mask)) & c.mask
-        elif c.how == "component":
-            arr[c.target][:, c.component] = v
+            ops.append((c.target, (v.astype(np.uint8) << bit_shift(c.mask)) & c.mask, True, None))
         else:
-            arr[c.target] = v
+            ops.append((c.target, v, False, c.component if c.how == "component" else None))
+    step = max(1, PACK_BLOCK_BYTES // arr.dtype.itemsize)
+    for s in range(0, n, step):
+        block = arr[s:s + step]
+        for target, v, bits, component in ops:
+            if bits:
+                block[target] |= v[s:s + step]
+            elif component is not None:
+                block[target][:, component] = v[s:s + step]
+            else:
+                block[target] = v[s:s + step]
     return arr
 
 

@@ -274,3 +274,21 @@ def test_units_need_not_follow_the_ingest_parts_nor_tiles_be_in_point_order(tmp_
     export(store, str(tmp_path / "out.laz"), client=client, part_points=1)  # rounded up to one chunk
     out = laspy.read(str(tmp_path / "out.laz"))
     np.testing.assert_array_equal(out.points.array, las.points.array)
+
+
+@pytest.mark.parametrize("fmt", [3, 7])
+def test_records_packed_block_by_block_are_those_packed_whole(tmp_path, monkeypatch, fmt):
+    """pack_part writes every field of a block of records at a time: blocks of one or two records (and a
+    last short one) give the bytes of one block holding every record, bit fields included."""
+    import tiles.export_layout as el
+
+    _las_with_classes(tmp_path / "in.las", n=301, fmt=fmt)
+    store = ingest([str(tmp_path / "in.las")], str(tmp_path / "s.zarr"))
+    layout = plan_layout(store)
+    cols = gather_points(store, [c for c in layout.store_names if c != "point_index"])
+    monkeypatch.setattr(el, "PACK_BLOCK_BYTES", 1 << 30)
+    whole = el.pack_part(cols, layout)
+    assert whole["X"].any() and len(whole) == 301
+    for size in (1, whole.dtype.itemsize * 2 - 1, whole.dtype.itemsize * 7):
+        monkeypatch.setattr(el, "PACK_BLOCK_BYTES", size)
+        assert el.pack_part(cols, layout).tobytes() == whole.tobytes()
