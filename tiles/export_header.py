@@ -90,38 +90,65 @@ def tracked_extra_bytes(header: laspy.LasHeader) -> list[tuple[str, list[Any] | 
     return out
 
 
+#: Bytes of records reduced at a time by :func:`unit_stats` (a field copied out of a whole unit streams every
+#: record through memory once per field; a block's fields are read while it is in the cache).
+STATS_BLOCK_BYTES = 1 << 20
+
+
 def unit_stats(arr: np.ndarray, pf: laspy.PointFormat, tracked: list[tuple[str, list[Any] | None]]) -> UnitStats:
     """The header statistics of packed records (``arr``, point format ``pf``).
 
     Bounds, GPS range and returns as laspy's ``LasHeader.grow`` takes them; the
     extra-bytes min/max over every valid value (laspy's own ``grow`` takes a
-    one-element field's from the first record written only).
+    one-element field's from the first record written only).  Reduced a block of
+    records at a time, the blocks' results then reduced.
     """
     n = len(arr)
-    xyz = [value_range(arr[c]) for c in "XYZ"] if n else [(0, 0)] * 3
-    mins, maxs = [int(lo) for lo, _ in xyz], [int(hi) for _, hi in xyz]
     names = arr.dtype.names or ()
+    fields = ["X", "Y", "Z"] + (["gps_time"] if "gps_time" in names else [])
+    ranges: dict[str, list[tuple[Any, Any]]] = {f: [] for f in fields}
+    returns = np.zeros(16, dtype=np.int64)
+    parts: list[list[list[tuple[Any, Any]]]] = []  # per tracked field, per component: the blocks' ranges
+    for name, _ in tracked:
+        width = 1 if arr.dtype[name].ndim == 0 else arr.dtype[name].shape[0]
+        parts.append([[] for _ in range(width)])
+    step = max(1, STATS_BLOCK_BYTES // max(arr.dtype.itemsize, 1))
+    for s in range(0, n, step):
+        block = arr[s:s + step]
+        for f in fields:
+            ranges[f].append(value_range(block[f]))
+        rn = np.asarray(laspy.PackedPointRecord(block, pf).return_number)
+        returns += np.bincount(rn, minlength=16)[:16]
+        for (name, no_data), comps in zip(tracked, parts):
+            v = block[name]
+            v = v[:, None] if v.ndim == 1 else v
+            for i, out in enumerate(comps):
+                col = np.ascontiguousarray(v[:, i])
+                if no_data is not None:
+                    col = col[col != no_data[i]]
+                if len(col):
+                    out.append((col.min(), col.max()))
+    xyz = [_reduce(ranges[c]) for c in "XYZ"] if n else [(0, 0)] * 3
+    mins, maxs = [int(lo) for lo, _ in xyz], [int(hi) for _, hi in xyz]
     gps = None
     if n and "gps_time" in names:
-        g_lo, g_hi = value_range(arr["gps_time"])
+        g_lo, g_hi = _reduce(ranges["gps_time"])
         gps = (float(g_lo), float(g_hi))
-    rn = np.asarray(laspy.PackedPointRecord(arr, pf).return_number)
-    returns = np.bincount(rn, minlength=16)[:16].astype(np.int64)
     extra: list[tuple[np.ndarray, np.ndarray] | None] = []
-    for name, no_data in tracked:
-        v = arr[name]
-        v = v[:, None] if v.ndim == 1 else v
-        lo, hi, ok = [], [], True
-        for i in range(v.shape[1]):
-            col = v[:, i] if no_data is None else v[v[:, i] != no_data[i], i]
-            if not len(col):
-                ok = False
-                break
-            a, b = value_range(col)
-            lo.append(a)
-            hi.append(b)
-        extra.append((np.asarray(lo), np.asarray(hi)) if ok else None)
+    for comps in parts:
+        if not comps or any(not out for out in comps):
+            extra.append(None)
+            continue
+        lohi = [_reduce(out) for out in comps]
+        extra.append((np.asarray([lo for lo, _ in lohi]), np.asarray([hi for _, hi in lohi])))
     return UnitStats(n, mins, maxs, gps, returns, extra)
+
+
+def _reduce(ranges: list[tuple[Any, Any]]) -> tuple[Any, Any]:
+    """The range of the blocks' ranges (a NaN in any block gives NaN, as numpy's own min and max over all)."""
+    lo = np.array([r[0] for r in ranges])
+    hi = np.array([r[1] for r in ranges])
+    return lo.min(), hi.max()
 
 
 def value_range(field: np.ndarray) -> tuple[Any, Any]:

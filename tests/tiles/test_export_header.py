@@ -41,3 +41,37 @@ def test_header_statistics_of_units_add_up_to_those_of_the_whole(tmp_path):
     np.testing.assert_array_equal(p.min, pair.min(axis=0))
     np.testing.assert_array_equal(p.max, pair.max(axis=0))
     assert isinstance(unit_stats(rec.array[:0], pf, tracked), UnitStats)
+
+
+def test_statistics_reduced_block_by_block_are_those_of_one_block(monkeypatch):
+    """unit_stats reads a block of records at a time: blocks of one to a few records, some holding only no-data
+    values of an extra dimension, give the statistics of one block holding them all."""
+    import tiles.export_header as eh
+
+    pf = laspy.PointFormat(7)
+    pf.add_extra_dimension(laspy.ExtraBytesParams("temp", "int16", no_data=[-1]))
+    pf.add_extra_dimension(laspy.ExtraBytesParams("pair", "2float64"))
+    rng = np.random.default_rng(4)
+    rec = laspy.PackedPointRecord.zeros(257, pf)
+    rec.X, rec.Y, rec.Z = rng.integers(-5000, 5000, (3, 257))
+    rec.gps_time = rng.uniform(0, 1, 257)
+    rec.return_number = rng.integers(0, 8, 257)
+    temp = rng.integers(0, 300, 257)
+    temp[:40] = -1  # the first blocks: no valid value
+    rec["temp"] = temp
+    rec["pair"] = rng.normal(0, 1, (257, 2))
+    tracked = [("temp", [-1]), ("pair", None)]
+    monkeypatch.setattr(eh, "STATS_BLOCK_BYTES", 1 << 30)
+    whole = eh.unit_stats(rec.array, pf, tracked)
+    assert whole.extra[0] is not None and whole.extra[0][0][0] == temp[temp >= 0].min()
+    for size in (1, pf.size * 3, pf.size * 50):
+        monkeypatch.setattr(eh, "STATS_BLOCK_BYTES", size)
+        got = eh.unit_stats(rec.array, pf, tracked)
+        assert (got.count, got.mins, got.maxs, got.gps) == (whole.count, whole.mins, whole.maxs, whole.gps)
+        np.testing.assert_array_equal(got.returns, whole.returns)
+        for g, w in zip(got.extra, whole.extra):
+            np.testing.assert_array_equal(g[0], w[0])
+            np.testing.assert_array_equal(g[1], w[1])
+    temp[:] = -1
+    rec["temp"] = temp
+    assert eh.unit_stats(rec.array, pf, tracked).extra[0] is None  # no valid value in any block
