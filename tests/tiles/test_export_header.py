@@ -7,22 +7,27 @@ import numpy as np
 from tiles.export_header import UnitStats, grow_header, set_extra_ranges, tracked_extra_bytes, unit_stats
 
 
-def test_header_statistics_of_units_add_up_to_those_of_the_whole(tmp_path):
-    pf = laspy.PointFormat(6)
+def _records(fmt: int, n: int, seed: int, returns: int):
+    """Random records of point format ``fmt`` with a no-data extra ``temp`` (values kept to set) and ``pair``."""
+    pf = laspy.PointFormat(fmt)
     pf.add_extra_dimension(laspy.ExtraBytesParams("temp", "int16", no_data=[-1]))
     pf.add_extra_dimension(laspy.ExtraBytesParams("pair", "2float64"))
+    rng = np.random.default_rng(seed)
+    rec = laspy.PackedPointRecord.zeros(n, pf)
+    rec.X, rec.Y, rec.Z = rng.integers(-5000, 5000, (3, n))
+    rec.gps_time = rng.uniform(0, 1, n)
+    rec.return_number = rng.integers(0, returns, n)
+    pair = rng.normal(0, 1, (n, 2))
+    rec["pair"] = pair
+    return pf, rec, rng.integers(0, 300, n), pair
+
+
+def test_header_statistics_of_units_add_up_to_those_of_the_whole(tmp_path):
+    pf, rec, temp, pair = _records(6, 1000, 2, 16)
     header = laspy.LasHeader(version="1.4", point_format=pf)
-    rng = np.random.default_rng(2)
-    rec = laspy.PackedPointRecord.zeros(1000, pf)
-    rec.X, rec.Y, rec.Z = rng.integers(-5000, 5000, (3, 1000))
-    rec.gps_time = rng.uniform(0, 1, 1000)
-    rec.return_number = rng.integers(0, 16, 1000)
-    temp = rng.integers(0, 300, 1000)
     temp[::3] = -1  # no data: not in the range
     temp[0] = -1
     rec["temp"] = temp
-    pair = rng.normal(0, 1, (1000, 2))
-    rec["pair"] = pair
     want = header.copy()
     want.partial_reset()
     want.grow(rec)
@@ -48,18 +53,9 @@ def test_statistics_reduced_block_by_block_are_those_of_one_block(monkeypatch):
     values of an extra dimension, give the statistics of one block holding them all."""
     import tiles.export_header as eh
 
-    pf = laspy.PointFormat(7)
-    pf.add_extra_dimension(laspy.ExtraBytesParams("temp", "int16", no_data=[-1]))
-    pf.add_extra_dimension(laspy.ExtraBytesParams("pair", "2float64"))
-    rng = np.random.default_rng(4)
-    rec = laspy.PackedPointRecord.zeros(257, pf)
-    rec.X, rec.Y, rec.Z = rng.integers(-5000, 5000, (3, 257))
-    rec.gps_time = rng.uniform(0, 1, 257)
-    rec.return_number = rng.integers(0, 8, 257)
-    temp = rng.integers(0, 300, 257)
+    pf, rec, temp, _ = _records(7, 257, 4, 8)
     temp[:40] = -1  # the first blocks: no valid value
     rec["temp"] = temp
-    rec["pair"] = rng.normal(0, 1, (257, 2))
     tracked = [("temp", [-1]), ("pair", None)]
     monkeypatch.setattr(eh, "STATS_BLOCK_BYTES", 1 << 30)
     whole = eh.unit_stats(rec.array, pf, tracked)
