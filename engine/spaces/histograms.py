@@ -13,6 +13,8 @@ segment gets both its all-heights and its upper-band histogram.  A tile only
 touches a few segments and a few hundred bins, so its result is a small dense
 block ``(present segments) x (the tile's bin range)`` (:class:`SparseHist`); the
 driver adds the blocks into one histogram per segment (:func:`accumulate`).
+Once the storeys are known the passes read each tile's points counted per
+``(bu, bv, storey, band)`` (:mod:`engine.spaces.bin_counts`) instead of the points.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.spaces.alignment import Frame
+from engine.spaces.bin_counts import tile_columns
 from tiles.tasks import run_tasks
 
 
@@ -238,28 +241,39 @@ class BoxIndex:
         """1 for points at or above their storey's upper-band z bin (``f``: storey rows of :meth:`blocks`)."""
         return (bz >= np.append(np.asarray(band_z, np.int64), np.iinfo(np.int64).max)[f]).view(np.int8)
 
-    def block_of(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Flat block index of each point in the storeys' arrangements (negative: outside every box's
-        range) and its storey row in the tables (``len(floors)``: none)."""
+    def storey_rows(self, bz: np.ndarray) -> np.ndarray:
+        """Row of each z bin's storey in the tables (``len(floors)``: none)."""
         f = bz - self.z0
         np.clip(f, 0, len(self.ztab) - 1, out=f)
-        f = self.ztab[f]
-        ui = bu - (self.umin - 1)
+        return self.ztab[f]
+
+    def block_in_storey(self, bu: np.ndarray, bv: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """Flat block index of each point of storey row ``f`` (:meth:`storey_rows`; negative: in no box's range)."""
+        ui = np.subtract(bu, self.umin - 1, dtype=np.int64)
         np.clip(ui, 0, self.nu + 1, out=ui)
         ui += f * (self.nu + 2)
-        vi = bv - (self.vmin - 1)
+        vi = np.subtract(bv, self.vmin - 1, dtype=np.int64)
         np.clip(vi, 0, self.nvb + 1, out=vi)
         vi += f * (self.nvb + 2)
         blk = self.ubase[ui]
         blk += self.vcol[vi]
-        return blk, f
+        return blk
+
+    def box_of_block(self, blk: np.ndarray) -> np.ndarray:
+        """Box of each flat block index (-1: none)."""
+        return self.flat[np.where(blk >= 0, blk, len(self.flat) - 1)]
+
+    def block_of(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flat block index of each point in the storeys' arrangements (negative: outside every box's
+        range) and its storey row in the tables (``len(floors)``: none)."""
+        f = self.storey_rows(bz)
+        return self.block_in_storey(bu, bv, f), f
 
     def blocks(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(block, box, storey)`` of each point: flat block index (negative: none), box (-1: none) and
         storey (``len(floors)``: none)."""
         blk, f = self.block_of(bu, bv, bz)
-        box = self.flat[np.where(blk >= 0, blk, len(self.flat) - 1)]
-        return blk, box, f
+        return blk, self.box_of_block(blk), f
 
     def locate(self, bu: np.ndarray, bv: np.ndarray, bz: np.ndarray) -> np.ndarray:
         """Box of each point, -1 outside every box."""
@@ -275,11 +289,12 @@ class SparseHist:
     counts: np.ndarray
 
 
-def keyed_histogram(segment: np.ndarray, bins: np.ndarray) -> SparseHist:
+def keyed_histogram(segment: np.ndarray, bins: np.ndarray, weights: np.ndarray | None = None) -> SparseHist:
     """Counts per ``(segment, bin)`` of the points with ``segment >= 0``, in ONE bincount.
 
     Points with a negative segment go to a trash row that is dropped, so no
     point is copied out; the bins span the tile's own range of ``bins``.
+    ``weights``: integer point counts of each entry (:class:`engine.spaces.bin_counts.BinCounts`; None: one each).
     """
     if len(segment) == 0:
         return SparseHist(np.zeros(0, np.int64), 0, np.zeros((0, 0), np.int64))
@@ -297,7 +312,9 @@ def keyed_histogram(segment: np.ndarray, bins: np.ndarray) -> SparseHist:
     key *= width
     key += bins
     key -= lo
-    counts = np.bincount(key, minlength=(len(present) + 1) * width)
+    counts = np.bincount(key, weights=weights, minlength=(len(present) + 1) * width)
+    if weights is not None:  # sums of integer counts, exact in float64 below 2**53
+        counts = np.rint(counts).astype(np.int64)
     return SparseHist(present, lo, counts.reshape(len(present) + 1, width)[:-1])
 
 
@@ -365,12 +382,12 @@ def segment_histograms(tile: str, store, grid: Grid, index: BoxIndex, axis_of: n
     ``4 * box + 2 * which + band``: ``which`` 0 for its axis, 1 for the other;
     ``band`` 1 for points in the storey's upper band (above door height).
     """
-    bu, bv, bz = grid.tile_bins(store, tile)
-    _, box, f = index.blocks(bu, bv, bz)
+    bu, bv, f, band, weight = tile_columns(tile, store, grid, index, band_z)
+    box = index.box_of_block(index.block_in_storey(bu, bv, f))
     axes = set(np.unique(axis_of[axis_of >= 0]).tolist())
     key_of = np.append(np.where(axis_of >= 0, 4 * np.arange(len(axis_of)), -4), -4)
     key = key_of[box]  # box -1 (none) -> the last entry
-    key += index.band_of(f, bz, band_z)
+    key += band
     if axes == {0}:
         first = bu
     elif axes == {1}:
@@ -378,11 +395,12 @@ def segment_histograms(tile: str, store, grid: Grid, index: BoxIndex, axis_of: n
     else:
         first = np.where(np.append(axis_of, 0)[box] == 1, bv, bu)
     if not both.any():
-        return keyed_histogram(key, first)
+        return keyed_histogram(key, first, weight)
     sel = np.flatnonzero(np.append(both, False)[box])
     ax = np.append(axis_of, 0)[box[sel]]
     return keyed_histogram(np.concatenate([key, key[sel] + 2]),
-                           np.concatenate([first, np.where(ax == 1, bu[sel], bv[sel])]))
+                           np.concatenate([first, np.where(ax == 1, bu[sel], bv[sel])]),
+                           None if weight is None else np.concatenate([weight, weight[sel]]))
 
 
 @dataclass
@@ -409,11 +427,12 @@ def edge_histograms(tile: str, store, grid: Grid, index: BoxIndex, edges: EdgeTa
     Each point counts in the edges of its block's four sides whose face lies
     within the window; all of them go to ONE bincount keyed by ``2 * edge + band``.
     """
-    bu, bv, bz = grid.tile_bins(store, tile)
-    blk, box, f = index.blocks(bu, bv, bz)
-    inside = np.flatnonzero(box >= 0)
-    band = index.band_of(f[inside], bz[inside], band_z).astype(np.int64)
+    bu, bv, f, band, weight = tile_columns(tile, store, grid, index, band_z)
+    blk = index.block_in_storey(bu, bv, f)
+    inside = np.flatnonzero(index.box_of_block(blk) >= 0)
+    band = band[inside].astype(np.int64)
     blk, bu, bv = blk[inside], bu[inside], bv[inside]
+    weight = None if weight is None else weight[inside]
     w = edges.window
     # the four sides' edges of every point at once: (points, 4)
     e = edges.flat[(4 * blk)[:, None] + np.arange(4)]
@@ -421,4 +440,4 @@ def edge_histograms(tile: str, store, grid: Grid, index: BoxIndex, edges: EdgeTa
     off -= edges.position[np.maximum(e, 0)]
     near = (e >= 0) & (off >= -w) & (off < w)
     rows = np.nonzero(near)[0]
-    return keyed_histogram(2 * e[near] + band[rows], off[near] + w)
+    return keyed_histogram(2 * e[near] + band[rows], off[near] + w, None if weight is None else weight[rows])

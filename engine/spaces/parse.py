@@ -21,6 +21,7 @@ import numpy as np
 
 from engine.spaces.alignment import AlignmentSettings, Frame, estimate_alignment, tile_evidence
 from engine.spaces.assemble import assemble
+from engine.spaces.bin_counts import CountedStore
 from engine.spaces.document import DOC, SpaceParse, jsonable
 from engine.spaces.histograms import BoxIndex, Grid, share, tiles_by_size, z_histogram
 from engine.spaces.labelling import label_tile
@@ -71,7 +72,7 @@ def parse_spaces(store: TileStore, *, client: Client | None = None, params: Spac
 
     t = time.perf_counter()
     edges = neighbour_edges(sl.cells, p.walls.bins(p.min_face))
-    test_edges(store, grid, sl.floors_arr, sl.cells, edges, p.walls, p.merge_window, sl.band_z, client=client,
+    test_edges(sl.counted, grid, sl.floors_arr, sl.cells, edges, p.walls, p.merge_window, sl.band_z, client=client,
                band_only=~sl.floor_scanned)
     comps = merge(sl.cells, edges, p.bin_width, p.rules, ~sl.floor_scanned)
     seconds["merging"] = time.perf_counter() - t
@@ -80,7 +81,8 @@ def parse_spaces(store: TileStore, *, client: Client | None = None, params: Spac
     index = BoxIndex.build(sl.floors_arr, np.array([c.row() for c in sl.cells]).reshape(-1, 5))
     refs = refine_large_spaces(store, grid, p, sl.floors_arr, sl.band_z, sl.cells, comps.labels, index, client,
                                ~sl.floor_scanned)
-    plan = _refined_plan(store, grid, p, sl, edges, comps, refs, client)
+    plan = _refined_plan(grid, p, sl, edges, comps, refs, client)
+    sl.counted.release()
     seconds["refining"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -109,6 +111,7 @@ class _Slicing:
     walls: list[FoundDivider]
     passes: list[dict[str, Any]]
     floor_scanned: np.ndarray  # per storey (:func:`engine.spaces.slicing.floor_scanned`)
+    counted: CountedStore  # the tiles' bin counts, for the building's later passes (merging)
 
 
 def _evidence_and_z(store: TileStore, tiles: list[str], p: SpaceSettings, client: Client | None
@@ -154,10 +157,13 @@ def _slice(store: TileStore, grid: Grid, z_hist: np.ndarray, z_lo: int, p: Space
                         "surface); walls are tested above door height only", f)
     band_z = np.array([g + int(round(p.upper_band / p.z_bin)) for g in ground], dtype=np.int64)
     start = _initial_boxes(store, grid, floors)
-    cells, walls, passes = slice_storeys(store, grid, floors, start, p.slicing_walls, band_z, client=client,
-                                         max_levels=p.max_levels, floor_scanned=np.array(scanned, dtype=bool))
     floors_arr = np.array(floors, dtype=np.int64).reshape(-1, 2)
-    return _Slicing(floors, floors_arr, slabs, band_z, cells, walls, passes, np.array(scanned, dtype=bool))
+    # every later pass of the building reads each tile's points counted per (u, v, storey, band) bin
+    counted = CountedStore(store, grid, BoxIndex.build(floors_arr, np.zeros((0, 5), np.int64)), band_z, client,
+                           tiles_by_size(store))
+    cells, walls, passes = slice_storeys(counted, grid, floors, start, p.slicing_walls, band_z, client=client,
+                                         max_levels=p.max_levels, floor_scanned=np.array(scanned, dtype=bool))
+    return _Slicing(floors, floors_arr, slabs, band_z, cells, walls, passes, np.array(scanned, dtype=bool), counted)
 
 
 def _initial_boxes(store, grid: Grid, floors: list[tuple[int, int]]) -> list[Box]:
@@ -175,7 +181,7 @@ def _initial_boxes(store, grid: Grid, floors: list[tuple[int, int]]) -> list[Box
     return [Box(f, u0, u1, v0, v1) for f in range(len(floors))]
 
 
-def _refined_plan(store: TileStore, grid: Grid, p: SpaceSettings, sl: _Slicing, edges: list[Edge],
+def _refined_plan(grid: Grid, p: SpaceSettings, sl: _Slicing, edges: list[Edge],
                   comps: Components, refs: list[Refinement], client: Client | None) -> RefinedPlan:
     """The refinements put in the building's plan, the cut faces tested again, the pieces rejoined."""
     plan = RefinedPlan.build(sl.cells, edges, comps.labels, refs, grid.frame, p.bin_width)
@@ -183,7 +189,7 @@ def _refined_plan(store: TileStore, grid: Grid, p: SpaceSettings, sl: _Slicing, 
     # was found on the whole face (a wall on one stretch); each piece is tested on its own stretch (a hallway
     # open across a line that is a wall between two rooms beside it).  Measured: hard set 0.939 -> 0.946
     # (h350 0.909 -> 0.928, h500-yaw33 0.961 -> 0.980), the clean set identical (0.9884).
-    test_edges(store, grid, sl.floors_arr, sl.cells, [plan.edges[i] for i in plan.pieces], p.walls, p.merge_window,
+    test_edges(sl.counted, grid, sl.floors_arr, sl.cells, [plan.edges[i] for i in plan.pieces], p.walls, p.merge_window,
                sl.band_z, client=client, band_only=~sl.floor_scanned)
     if p.rejoin:
         source = np.full(plan.n_spaces, -1, dtype=np.int64)

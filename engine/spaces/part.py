@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from engine.spaces.alignment import Frame
+from engine.spaces.bin_counts import CountedStore
 from engine.spaces.histograms import BoxIndex, Grid
 from engine.spaces.memory_store import MemoryStore, PieceStore, in_task
 from engine.spaces.slicing import Box, FoundDivider
@@ -86,10 +87,14 @@ def _parse_part_with(mem: MemoryStore, passes, yaw: float, grid: Grid, params, f
     if passes is not mem:  # the passes read the pieces: this task's copy of the bins is no longer needed
         del bu, bv, bzs
         mem.drop_bins()
+    # the passes read the points counted per (u, v, storey, band) bin (engine.spaces.bin_counts)
+    passes = CountedStore(passes, sub, BoxIndex.build(fl, np.zeros((0, 5), np.int64)), bz, client,
+                          [t.name for t in passes.tiles])
     cells, dividers, _ = slice_storeys(passes, sub, [tuple(fl[0])], start, params.slicing_walls, bz, client=client,
                                        max_levels=params.max_levels, ridges=ridges, ridge_params=params.ridges)
     edges = neighbour_edges(cells, params.walls.bins(params.min_face))
     test_edges(passes, sub, fl, cells, edges, params.walls, params.merge_window, bz, client=client)
+    passes.release()
     # a side with a ceiling in the storey and a side without one (a stair shaft) are not one room
     edges = ceiling_dividers(edges, ceiling, params.ceilings, grid.bin_width)
     if ridges:
