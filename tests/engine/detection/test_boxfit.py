@@ -35,6 +35,42 @@ def test_axis_features_of_a_plane_and_mirrored():
     assert bf.axis_features(far, lo, hi, 0, mirror=False)[-1] == 1.0
 
 
+def _reference_axis_features(points, lo, hi, axis, mirror):
+    """The features as first written: np.quantile, np.histogram and a mean on the unsorted values."""
+    other = [a for a in range(3) if a != axis]
+    s = max(hi[axis] - lo[axis], 1e-6)
+    within = (points >= lo) & (points <= hi)
+    u = (points[within[:, other[0]] & within[:, other[1]], axis] - lo[axis]) / s
+    u = 1.0 - u if mirror else u
+    u = u[(u >= -bf.GROW) & (u <= 1.0 + bf.GROW)]
+    f = np.zeros(bf.N_FEATURES)
+    f[-3] = np.log(s)
+    if len(u) < 3:
+        f[:len(bf.QUANTILES)], f[-1] = 0.5, 1.0
+        return f
+    f[:len(bf.QUANTILES)] = np.quantile(u, bf.QUANTILES)
+    f[len(bf.QUANTILES):len(bf.QUANTILES) + bf.BINS] = np.histogram(u, bins=bf.BINS, range=(-bf.GROW, 1.0 + bf.GROW))[0] / len(u)
+    f[-2] = np.mean((u >= 0) & (u <= 1))
+    return f
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_axis_features_are_those_of_quantiles_and_a_histogram_of_the_values(seed):
+    """Bit for bit, values on the profile's bin edges and on the box's faces included."""
+    rng = np.random.default_rng(seed)
+    lo, hi = np.array([1.0, 2.0, 0.0]), np.array([1.5, 3.0, 2.0])
+    n = int(rng.integers(3, 5000))
+    pts = rng.uniform([0.0, 1.5, -0.5], [2.5, 3.5, 2.5], (n, 3))
+    # some points exactly on the bin edges and faces (in box units: lo + edge * size)
+    on = rng.integers(0, n, n // 4)
+    pts[on, 0] = lo[0] + rng.choice(bf.PROFILE_EDGES, len(on)) * 0.5
+    pts = np.round(pts, 2) if seed % 2 else pts  # ties
+    for axis in range(3):
+        for mirror in (False, True):
+            np.testing.assert_array_equal(bf.axis_features(pts, lo, hi, axis, mirror),
+                                          _reference_axis_features(pts, lo, hi, axis, mirror))
+
+
 def test_roles_and_face_offsets_round_trip():
     rng = np.random.default_rng(3)
     extent = np.array([6.0, 4.0, 4.0])
