@@ -7,6 +7,8 @@ of scanned surface; ``--quick``: about 1 M), on a 2-worker LocalCluster:
   over every tile (read the coordinates, bin them in the aligned frame, locate
   them in the storeys' boxes, ONE keyed bincount per tile, blocks summed on the
   driver), as the first slicing pass does.
+* the same pass over the tiles' bin counts (:mod:`engine.spaces.bin_counts`: the counts made, then
+  another pass alone), as every later pass of the stage reads them; the histograms must be the same.
 * references, in the same run, on the same points loaded into this process:
   ``numpy in memory`` -- the same histogram computed by numpy in one process
   from the coordinates in memory (the same binning, look-up and bincount, no
@@ -103,6 +105,25 @@ def run(quick: bool = False) -> dict[str, Any]:
         counted = int(sum(h.sum() for h in hists))
         rows.append({"step": "histogram pass over the store (2 workers)", "points": n, "seconds": round(pass_s, 3),
                      "points_per_s": n / pass_s, "counted": counted})
+        # -- the same pass over the tiles' bin counts (engine.spaces.bin_counts), as the later passes read them:
+        # the counts made and the pass, then a second pass alone
+        from engine.spaces.bin_counts import CountedStore
+        from engine.spaces.histograms import BoxIndex
+
+        storeys = BoxIndex.build(index.floors, np.zeros((0, 5), np.int64))
+        for step in ("bin counts made, and a pass over them (2 workers)", "another pass over the bin counts (2 workers)"):
+            t0 = time.perf_counter()
+            if step.startswith("bin counts made"):
+                bin_counts = CountedStore(store, grid, storeys, band_z, client, tiles)
+            parts = run_tasks(segment_histograms, [bin_counts.task_input(t) for t in tiles], client=client,
+                              label="histogram pass", keys=tiles,
+                              extra_args=(bin_counts, grid, idx, axis_of, both, band_z))
+            same = accumulate(parts, lo, length)
+            seconds = time.perf_counter() - t0
+            assert all(np.array_equal(a, b) for a, b in zip(same, hists)), "the pass over the bin counts disagrees"
+            rows.append({"step": step, "points": n, "seconds": round(seconds, 3), "points_per_s": n / seconds,
+                         "counted": counted})
+        bin_counts.release()
         # -- references on the same points, in this process
         raw = [store.read(t, ("x", "y", "z")) for t in store.tiles]
         affine = grid.raw_affine(store.meta)
