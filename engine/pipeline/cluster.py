@@ -140,6 +140,33 @@ def pin_library_threads(client: Client | None) -> None:
     client.register_plugin(LibraryThreads(n), name=LibraryThreads.name)
 
 
+def malloc_trim() -> bool:
+    """Give the free memory of this process's heap back to the system (glibc's ``malloc_trim``).
+
+    A stage frees most of what it allocated, but the heap keeps the freed space between live blocks: after the
+    spaces stage of the 600 m² building the two workers held 1.5 GB of it, 0.35 GB once trimmed, and the next
+    stages' peaks started from there (dask's documented remedy: "Manually trim memory").  False where there is no
+    glibc (macOS, Windows): nothing to do.
+    """
+    import ctypes
+
+    try:
+        return bool(ctypes.CDLL("libc.so.6").malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
+
+
+def trim_memory(client: Client | None) -> None:
+    """:func:`malloc_trim` in every worker of ``client`` and in this process (between stages)."""
+    malloc_trim()
+    if client is None:
+        return
+    try:
+        client.run(malloc_trim)
+    except Exception as exc:  # a worker gone or busy: trimming is only an economy
+        logger.debug("could not trim the workers' memory: %s", exc)
+
+
 def _security_for(address: str):
     """dask's own security settings (``distributed.comm.tls.*``), checked for a ``tls://`` address."""
     from distributed.security import Security

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+from engine.pipeline.cluster import trim_memory
 from engine.pipeline.stages import StageLog, StageRecord, Timer, failures_recorded
 from tiles.store import TileStore
 
@@ -95,6 +96,7 @@ class RunContext:
         """
         with failures_recorded(self.log, name, fp), Timer() as t:
             result = work()
+        trim_memory(self.client)  # what the stage freed, back to the system before the next one
         self.timings[name] = t.seconds
         self.log.write(StageRecord(name, fp, "ok", t.seconds, outputs=outputs(result) if outputs else {}))
         return result, t.seconds

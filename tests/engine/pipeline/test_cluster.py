@@ -199,3 +199,18 @@ def test_performance_report_reads_offline(client, tmp_path):
     with cluster.performance_report(None, str(tmp_path / "none.html")):
         pass
     assert not (tmp_path / "none.html").exists()
+
+
+def test_memory_is_trimmed_here_and_in_every_worker(client):
+    import sys
+
+    from engine.pipeline.cluster import malloc_trim, trim_memory
+
+    trim_memory(client)
+    trim_memory(None)
+    done = client.run(malloc_trim)
+    assert len(done) == len(client.scheduler_info()["workers"])
+    if sys.platform.startswith("linux"):  # glibc: malloc_trim is there (it says whether it gave memory back)
+        assert all(isinstance(v, bool) for v in done.values())
+    else:
+        assert not any(done.values())

@@ -34,3 +34,29 @@ def test_the_api_refuses_a_missing_input_before_making_the_output_folder(tmp_pat
     with pytest.raises(UserError, match="no such file or folder"):
         run(str(tmp_path / "nope.laz"), str(tmp_path / "out"))
     assert not (tmp_path / "out").exists()
+
+
+class _Docs:
+    """The documents of a store, in memory (what the stage records need)."""
+
+    def __init__(self):
+        self.docs = {}
+
+    def doc(self, name):
+        return self.docs.get(name)
+
+    def set_doc(self, name, doc):
+        self.docs[name] = doc
+
+
+def test_every_stage_gives_what_it_freed_back_to_the_system(monkeypatch, tmp_path):
+    """After each stage the driver and the workers trim their heaps (engine.pipeline.cluster.trim_memory)."""
+    import engine.pipeline.context as context
+
+    calls = []
+    monkeypatch.setattr(context, "trim_memory", lambda client: calls.append(client))
+    ctx = context.RunContext("in.laz", str(tmp_path), RunSettings(), "the client", str(tmp_path), _Docs())
+    result, _ = ctx.stage("spaces", "fp", lambda: calls.append("work") or 7, load=lambda: None)
+    assert result == 7 and calls == ["work", "the client"]
+    assert ctx.stage("spaces", "fp", lambda: 8, load=lambda: 7) == (7, None)  # skipped: nothing run, nothing trimmed
+    assert calls == ["work", "the client"]
