@@ -65,9 +65,7 @@ def _grid_key(grid: Grid) -> tuple[float, ...]:
 def count_tile(tile: str, store, grid: Grid, index: BoxIndex, band_z: np.ndarray) -> BinCounts:
     """:class:`BinCounts` of one tile (``index`` gives the storeys; its boxes are not used)."""
     band_z = np.asarray(band_z, dtype=np.int64)
-    bu, bv, bz = grid.tile_bins(store, tile)
-    f = index.storey_rows(bz)
-    band = index.band_of(f, bz, band_z)
+    bu, bv, f, band, _ = tile_columns(tile, store, grid, index, band_z)  # the points themselves
     if len(bu) == 0:
         z = np.zeros(0, np.int32)
         return BinCounts(z, z, z.astype(np.int16), z.astype(np.int8), z, grid, index.floors, band_z)
