@@ -102,6 +102,7 @@ SETTINGS: dict[str, Any] = {
         "min-space-density": "float in [0, 1)", "top-classes": "classes", "top-reach": "float >= 0",
         "opening-classes": "classes", "opening-grow": "float >= 0",
         "face-classes": "classes", "face-grow": "float >= 0",
+        "side-classes": "classes", "side-reach": "float > 0", "side-floor": "float",
         "colour-free-model": "one of auto, always, never",
         "train": {
             "c": "float > 0", "rounds": "int >= 0", "max-stride": "float > 0",

@@ -23,6 +23,8 @@ from engine.detection.proposals import Proposal
 from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
 
+#: Key of ``Proposal.extra`` marking a proposal the CRF keeps whatever its score (engine.detection.sides).
+SURE = "sure"
 #: Key of ``Proposal.extra`` where the CRF leaves each proposal's contextual score (:func:`flip_margins`).
 MARGIN = "crf_margin"
 
@@ -104,7 +106,9 @@ def select_space(proposals: list[Proposal], weights: CRFWeights,
             "kept": 0, "objective": 0.0, "warning": None}
     graph = build_graph(proposals, weights.k, weights.grid, max_nodes_per_class=settings.max_nodes_per_class)
     unary, pairwise = energies(graph, weights)
-    y, sinfo = solve_fixed(unary, graph.edges, pairwise, fixed_labels(graph, weights, settings.keep_classes), settings)
+    sure = np.array([bool(p.extra.get(SURE)) for p in proposals], dtype=bool)  # a wall at a side (detection.sides)
+    y, sinfo = solve_fixed(unary, graph.edges, pairwise, fixed_labels(graph, weights, settings.keep_classes, sure),
+                           settings)
     warning = f"space {sid}: {sinfo['warning']}" if sinfo["warning"] else None
     info = {"space_id": sid, "status": sinfo["status"], "seconds": time.perf_counter() - t0,
             "solver_seconds": sinfo["seconds"], "nodes": graph.n, "edges": graph.m, "kept": int(y.sum()),

@@ -120,10 +120,14 @@ def _solver(settings: CRFSettings) -> Any:
     return solver
 
 
-def fixed_labels(graph: CRFGraph, weights: CRFWeights, keep: tuple[str, ...] = ()) -> np.ndarray | None:
-    """Per node: 1 for the nodes of the classes ``keep`` (always kept), 1/0 for those of classes the CRF
-    does not decide (the detector's score > 0), -1 for the free ones; None when every node is free."""
+def fixed_labels(graph: CRFGraph, weights: CRFWeights, keep: tuple[str, ...] = (),
+                 sure: np.ndarray | None = None) -> np.ndarray | None:
+    """Per node: 1 for the nodes of the classes ``keep`` and the ``sure`` nodes (always kept), 1/0 for those of
+    classes the CRF does not decide (the detector's score > 0), -1 for the free ones; None when every node is
+    free."""
     kept = np.isin(graph.classes, [ELEMENT_CLASSES.index(c) for c in keep])
+    if sure is not None:
+        kept |= np.asarray(sure, dtype=bool)
     fixed = ~weights.decides[graph.classes] | kept
     if not fixed.any():
         return None

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.crf.apply import select_space
+from engine.crf.apply import SURE, select_space
 from engine.crf.labels import proposal_labels
 from engine.crf.model import N_CLASSES, CRFSettings, CRFWeights
 from engine.detection.proposals import Proposal
@@ -46,6 +46,12 @@ def set_ap(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
             tps[p.class_code].append(bool(t))
     return np.array([average_precision(np.array(scores[c]), np.array(tps[c], dtype=bool), int(n_gt[c]))
                      for c in range(N_CLASSES)])
+
+
+def detector_set(proposals: Sequence[Proposal], always: list[int]) -> np.ndarray:
+    """The detector's own decision on a space's proposals: score > 0, or of a class kept always
+    (``crf.keep-classes``), or sure (a wall at a side, :mod:`engine.detection.sides`)."""
+    return np.array([p.score > 0 or p.class_code in always or bool(p.extra.get(SURE)) for p in proposals], dtype=bool)
 
 
 def gate(ap_crf: np.ndarray, ap_set: np.ndarray, margin: float = MARGIN) -> np.ndarray:
@@ -95,8 +101,7 @@ def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
     fold = building_folds(bid, n_folds)
     always = [ELEMENT_CLASSES.index(c) for c in settings.keep_classes]  # kept by both sets (crf.keep-classes)
     ap_set = set_ap(proposals_per_space, ground_truth_per_space,
-                    [np.array([p.score > 0 or p.class_code in always for p in props], dtype=bool)
-                     for props in proposals_per_space], iou)
+                    [detector_set(props, always) for props in proposals_per_space], iou)
     report.update(folds=n_folds, detector_set={c: _pct(a) for c, a in zip(ELEMENT_CLASSES, ap_set)}, candidates={})
     best: tuple[float, float, np.ndarray] | None = None
     for cost in costs:
@@ -113,8 +118,7 @@ def choose(proposals_per_space: Sequence[Sequence[Proposal]], ground_truth_per_s
             for i, (mask, _, _) in zip(test, outs):
                 keep[i] = mask
         ap_crf = set_ap(proposals_per_space, ground_truth_per_space,
-                        [m if len(m) == len(p) else np.array([q.score > 0 or q.class_code in always for q in p],
-                                                             dtype=bool)
+                        [m if len(m) == len(p) else detector_set(p, always)
                          for m, p in zip(keep, proposals_per_space)], iou)
         decides = gate(ap_crf, ap_set)
         gated = np.where(decides, ap_crf, ap_set)

@@ -4,7 +4,8 @@ Every window of the dictionary is scored over the space (:func:`window_candidate
 shape together), those above ``score-threshold`` are kept, at most ``pre-nms`` per window shape
 (:func:`top_windows`); per class (:func:`class_windows`), non-maximum suppression of the boxes grown to
 ``nms-min-size``, a half-step local search (:func:`local_search`), NMS again, at most ``max-per-class``, and
-the one ceiling and floor of ``one-per-space`` (every space gets both: ``one-per-space-always``).  Design notes:
+the one ceiling and floor of ``one-per-space`` (every space gets both: ``one-per-space-always``), and a wall on
+every side of the space that holds one (``side-classes``, :mod:`engine.detection.sides`).  Design notes:
 ``docs/design/detection.md``.
 """
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 from engine.detection.features import window_features
 from engine.detection.model import Model
 from engine.detection.settings import DetectionSettings
+from engine.detection.sides import best_at_sides, side_windows
 from engine.detection.sliding import WindowScores, non_maximum_suppression, score_windows_many, window_shape
 from engine.detection.surfaces import surface_order
 from engine.detection.volume import SpaceVolume
@@ -24,8 +26,9 @@ def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSetting
                       classes: list[int] | None = None) -> dict[int, tuple[np.ndarray, ...]]:
     """Per dictionary atom, its windows above ``score-threshold`` (at most ``pre-nms``, best first).
 
-    Returns ``{atom index: (lo, hi, score, atom index per window)}`` for the atoms of the
-    trained (and requested) classes that have any.  Atoms whose windows have the same
+    Returns ``{atom index: (lo, hi, score, atom index per window, side)}`` for the atoms of the
+    trained (and requested) classes that have any; ``side`` marks the best window at each side of the space of a
+    ``side-classes`` atom (:func:`engine.detection.sides.side_windows`, above ``side-floor``).  Atoms whose windows have the same
     voxel shape in this space are scored together (:func:`engine.detection.sliding.score_windows_many`
     computes their features once): the scores are those of one :func:`engine.detection.sliding.score_windows` call each.
     """
@@ -38,19 +41,31 @@ def window_candidates(vol: SpaceVolume, model: Model, settings: DetectionSetting
             shape = window_shape(atom.size_in(grid.extent), grid)
             groups.setdefault(tuple(int(v) for v in shape), []).append(ai)
     always = {ELEMENT_CLASSES.index(c) for c in settings.one_per_space} if settings.one_per_space_always else set()
+    sided = {ELEMENT_CLASSES.index(c) for c in settings.side_classes}
+    thin, reach = settings.thin_voxels, side_reach(settings, grid.voxel)
     out: dict[int, tuple[np.ndarray, ...]] = {}
     for shape, members in groups.items():
         w, b = model.window_weights(members)
         # a class every space gets one of is scored everywhere: its best window may lie below the threshold
-        sure = any(model.dictionary.atoms_[ai].class_code in always for ai in members)
+        codes = {model.dictionary.atoms_[ai].class_code for ai in members}
+        floor = settings.score_threshold if not codes & sided else min(settings.score_threshold, settings.side_floor)
         scored = score_windows_many(vol, np.array(shape), w, b, model.layout, settings.stride,
                                     settings.min_window_points, settings.max_stride,
-                                    floor=None if sure else settings.score_threshold)
+                                    floor=None if codes & always else floor)
         for ai, ws in zip(members, scored):
-            top = top_windows(ws, ai, settings, -np.inf if model.dictionary.atoms_[ai].class_code in always else None)
-            if top is not None:
-                out[ai] = top
+            c = model.dictionary.atoms_[ai].class_code
+            parts = [top_windows(ws, ai, settings, -np.inf if c in always else None)]
+            if c in sided:
+                parts.append(side_windows(ws, ai, grid.shape, thin, reach, settings.side_floor))
+            found = [(*p, np.full(len(p[0]), i == 1)) for i, p in enumerate(parts) if p is not None]
+            if found:
+                out[ai] = tuple(np.concatenate(a) for a in zip(*found))
     return out
+
+
+def side_reach(settings: DetectionSettings, voxel: np.ndarray) -> np.ndarray:
+    """``side-reach`` in whole voxels along each axis (at least one)."""
+    return np.maximum(1, np.round(settings.side_reach / np.asarray(voxel, dtype=float))).astype(np.int64)
 
 
 def top_windows(ws: WindowScores, atom: int, settings: DetectionSettings,
@@ -114,15 +129,21 @@ def class_windows(c: int, candidates: dict[int, tuple[np.ndarray, ...]], vol: Sp
 
     NMS, local search and NMS again (``local-search``), then the one window of a ``one-per-space`` class
     (with ``one-per-space-always``, the best of its windows below ``score-threshold`` when none is above it).
-    Returns ``(lo, hi, score, class code, atom index)`` of the kept windows, or None without candidates.
+    Then, for a ``side-classes`` class, the best side window (:func:`window_candidates`'s ``side``) at each side
+    of the space (:func:`engine.detection.sides.best_at_sides`), as a candidate that
+    :func:`engine.detection.sides.settle_sides` keeps or drops once the final scores are known.
+    Returns ``(lo, hi, score, class code, atom index, candidate)`` of the kept windows, or None without
+    candidates.
     """
     grid = vol.grid
     atoms = model.dictionary.atoms_
-    found = [candidates[ai] for ai in sorted(candidates) if atoms[ai].class_code == c]
+    found = [_with_side(candidates[ai]) for ai in sorted(candidates) if atoms[ai].class_code == c]
     if not found:
         return None
-    los, his, scs, ats = zip(*found)
-    lo, hi, sc, at = np.concatenate(los), np.concatenate(his), np.concatenate(scs), np.concatenate(ats)
+    lo, hi, sc, at, side = (np.concatenate(parts) for parts in zip(*found))
+    pool = (lo[side], hi[side], sc[side], at[side])
+    normal = ~side | (sc > settings.score_threshold)
+    lo, hi, sc, at = lo[normal], hi[normal], sc[normal], at[normal]
     if ELEMENT_CLASSES[c] in settings.one_per_space:  # windows below the threshold only when none is above it
         above = sc > settings.score_threshold
         if above.any() and not above.all():
@@ -142,4 +163,16 @@ def class_windows(c: int, candidates: dict[int, tuple[np.ndarray, ...]], vol: Sp
             keep = surface_order(keep, lo, hi, grid.shape[2], ELEMENT_CLASSES[c] == "ceiling",
                                  settings.surface_choice)
         keep = keep[:1]  # a space has one floor and one ceiling: the first window of the class
-    return lo[keep], hi[keep], sc[keep], np.full(len(keep), c), at[keep]
+    lo, hi, sc, at = lo[keep], hi[keep], sc[keep], at[keep]
+    candidate = np.zeros(len(keep), dtype=bool)
+    if len(pool[0]):  # the best side window at each side, settled once the final scores are known
+        add = best_at_sides(pool[0], pool[1], pool[2], grid.shape, settings.thin_voxels,
+                            side_reach(settings, grid.voxel))
+        lo, hi, sc, at = (np.concatenate([a, p[add]]) for a, p in zip((lo, hi, sc, at), pool))
+        candidate = np.concatenate([candidate, np.ones(len(add), dtype=bool)])
+    return lo, hi, sc, np.full(len(lo), c), at, candidate
+
+
+def _with_side(found: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """A candidates entry with its ``side`` marks (none where the entry has none: candidates made without sides)."""
+    return found if len(found) > 4 else (*found, np.zeros(len(found[0]), dtype=bool))

@@ -54,6 +54,9 @@ class DetectionSettings:
     top_reach: float = 0.6
     opening_classes: tuple[str, ...] = ("window",)
     opening_grow: float = 1.5
+    side_classes: tuple[str, ...] = ("wall",)
+    side_reach: float = 0.3
+    side_floor: float = -3.0
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -80,10 +83,12 @@ class DetectionSettings:
             raise ValueError(f"opening-grow must be >= 0, got {self.opening_grow}")
         if self.top_reach < 0:
             raise ValueError(f"top-reach must be >= 0, got {self.top_reach}")
+        if self.side_reach <= 0:
+            raise ValueError(f"side-reach must be > 0, got {self.side_reach}")
         if self.face_grow < 0:
             raise ValueError(f"face-grow must be >= 0, got {self.face_grow}")
         for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes", "top_classes",
-                     "opening_classes", "face_classes"):
+                     "opening_classes", "face_classes", "side_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

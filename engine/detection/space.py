@@ -15,7 +15,7 @@ from functools import partial
 import numpy as np
 
 from engine.detection import moments as mom
-from engine.detection.candidates import class_windows, window_candidates
+from engine.detection.candidates import class_windows, side_reach, window_candidates
 from engine.detection.canonical import CanonicalFrame, estimate_frame
 from engine.detection.faces import fit_faces
 from engine.detection.model import Model
@@ -25,6 +25,7 @@ from engine.detection.pointindex import PointIndex
 from engine.detection.proposals import Proposal
 from engine.detection.reveal import refine_reveals
 from engine.detection.settings import DetectionSettings
+from engine.detection.sides import settle_sides
 from engine.detection.surfaces import refine_surfaces
 from engine.detection.tops import fit_tops
 from engine.detection.volume import SpaceVolume
@@ -65,13 +66,14 @@ class Detections:
     score: np.ndarray
     class_code: np.ndarray
     atom: np.ndarray
+    sure: np.ndarray | None = None  # (n,) bool: kept whatever its score (a wall at a side, engine.detection.sides)
 
     @classmethod
     def empty(cls) -> Detections:
         """No detections."""
         z3 = np.zeros((0, 3), dtype=np.int64)
         return cls(z3, z3, z3.astype(float), z3.astype(float), np.zeros(0), np.zeros(0, np.int64),
-                   np.zeros(0, np.int64))
+                   np.zeros(0, np.int64), np.zeros(0, dtype=bool))
 
 
 def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings,
@@ -86,7 +88,7 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                  if (found := class_windows(c, candidates, vol, model, settings)) is not None]
     if not per_class:
         return Detections.empty()
-    lo, hi, score, cls_all, at_all_cat = (np.concatenate(parts) for parts in zip(*per_class))
+    lo, hi, score, cls_all, at_all_cat, candidate = (np.concatenate(parts) for parts in zip(*per_class))
     vox = grid.voxel
     lo_m, hi_m = lo * vox, hi * vox
     at_most = settings.feature_points or None
@@ -99,6 +101,10 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     if settings.refine and index is not None and model.rescorer is not None and settings.rescore:
         score = model.rescorer.apply(score, cls_all, lo_m, hi_m, sample,
                                      np.asarray(vol.frame.extent, float))
+    keep, sure = side_walls(lo, hi, score, cls_all, candidate, grid, settings)
+    if not keep.all():
+        lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = (
+            a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure))
     if settings.refine and index is not None and settings.planar_classes:
         # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)
         fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
@@ -115,9 +121,23 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     if settings.hanging_classes:  # a beam hangs from the ceiling: not one whose top is in the lower half
         keep = ~fallen(cls_all, hi_m, float(vol.frame.extent[2]), settings.hanging_classes)
         if not keep.all():
-            lo, hi, lo_m, hi_m, score, cls_all, at_all_cat = (a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all,
-                                                                                at_all_cat))
-    return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat)
+            lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = (
+                a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure))
+    return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure)
+
+
+def side_walls(lo: np.ndarray, hi: np.ndarray, score: np.ndarray, class_code: np.ndarray, candidate: np.ndarray,
+               grid: mom.VoxelGrid, settings: DetectionSettings) -> tuple[np.ndarray, np.ndarray]:
+    """``(keep, sure)``: :func:`engine.detection.sides.settle_sides` for each class of ``side-classes``."""
+    keep, sure = np.ones(len(score), dtype=bool), np.zeros(len(score), dtype=bool)
+    for name in settings.side_classes:
+        of = np.asarray(class_code) == ELEMENT_CLASSES.index(name)
+        if of.any():
+            k, s = settle_sides(lo, hi, score, of, candidate, grid.shape, settings.thin_voxels,
+                                side_reach(settings, grid.voxel))
+            keep &= k
+            sure |= s
+    return keep, sure
 
 
 def fallen(class_code: np.ndarray, hi_m: np.ndarray, height: float, hanging: tuple[str, ...]) -> np.ndarray:
@@ -134,6 +154,7 @@ def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,
     world = CanonicalFrame(f.yaw, f.origin + np.asarray(origin, dtype=np.float64), f.extent, f.entrance, f.info)
     out = []
     atoms = model.dictionary.atoms_
+    sure = np.zeros(len(det.score), dtype=bool) if det.sure is None else det.sure
     for i in range(len(det.score)):
         p = det.lo_m[i] / f.extent
         s = (det.hi_m[i] - det.lo_m[i]) / f.extent
@@ -141,7 +162,7 @@ def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,
         out.append(Proposal(space_id=int(space_id), class_code=int(det.class_code[i]), score=float(det.score[i]),
                             position=p, size=s, occupancy=atoms[int(det.atom[i])].occupancy.copy(),
                             center=center, world_size=size, yaw=float(yaw),
-                            extra={"atom": int(det.atom[i])}))
+                            extra={"atom": int(det.atom[i]), **({"sure": True} if sure[i] else {})}))
     return out
 
 

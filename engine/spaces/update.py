@@ -60,16 +60,21 @@ class UpdateSettings:
 
 
 def wall_boxes(walls: Sequence[Any]) -> np.ndarray:
-    """``(n, 7)`` ``[cx, cy, cz, dx, dy, dz, yaw]`` of the walls among Proposals or ``elements.json`` records."""
+    """``(n, 7)`` ``[cx, cy, cz, dx, dy, dz, yaw]`` of the walls among Proposals or ``elements.json`` records.
+
+    A wall added at a side of its space because the space ends there (``extra["sure"]``,
+    :mod:`engine.detection.sides`) is no evidence that it ends there: it is left out."""
     rows = []
     for w in walls:
         if isinstance(w, dict):
             code = int(w.get("class_code", CLASS_CODES.get(str(w.get("class", "")), -1)))
             box = [*w["center"], *w["size"], float(w.get("yaw", 0.0))]
+            sure = bool(w.get("extra", {}).get("sure"))
         else:
             code = int(w.class_code)
             box = [*w.center, *w.world_size, float(w.yaw)]
-        if code == WALL:
+            sure = bool(w.extra.get("sure"))
+        if code == WALL and not sure:
             rows.append(box)
     return np.asarray(rows, dtype=np.float64).reshape(-1, 7)
 

@@ -200,3 +200,21 @@ def test_a_spaces_ceiling_and_floor_are_kept_whatever_their_score():
     assert kept == []
     with pytest.raises(ValueError, match="keep-classes"):
         CRFSettings(keep_classes="ceiling,attic")
+
+
+def test_a_sure_proposal_is_kept_whatever_its_score():
+    """A wall added at a side of its space (``extra["sure"]``, engine.detection.sides) is kept as a space's ceiling
+    is: by the detector's decision and by a CRF that would drop it; a wall beside it with the same score is not."""
+    from engine.crf.apply import SURE
+
+    sure = prop(WALL, [0.0, 0.1, 0], [0.05, 0.8, 1], -1.2)
+    sure.extra[SURE] = True
+    other = prop(WALL, [0.9, 0.1, 0], [0.05, 0.8, 1], -1.2)
+    w = CRFWeights.new(K, k=2)
+    w.decides[:] = False
+    kept, _ = select_elements([sure, other], w, settings=CRFSettings(keep_classes=()))
+    assert kept == [sure]
+    w.decides[:] = True
+    w.bias[WALL] = -10.0
+    kept, _ = select_elements([sure, other], w, settings=CRFSettings(keep_classes=()))
+    assert kept == [sure]

@@ -231,6 +231,9 @@ def test_face_coverage_rules(yaw):
     assert cov(_wall(frame, 8.1, 5.0, 0.2, 4.0)) == pytest.approx(1.0)  # only its overlap with the face counts
     chair = dict(_wall(frame, 8.1, 2.0, 0.2, 4.0), class_code=8, **{"class": "chair"})
     assert cov(chair) == 0.0  # only walls
+    # a wall added at its space's side because the space ends there (engine.detection.sides) is no evidence
+    sure = dict(_wall(frame, 8.1, 2.0, 0.2, 4.0), extra={"sure": True})
+    assert cov(sure) == 0.0
 
 
 def test_parameters_are_checked():
