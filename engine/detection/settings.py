@@ -57,6 +57,9 @@ class DetectionSettings:
     side_classes: tuple[str, ...] = ("wall",)
     side_reach: float = 0.3
     side_floor: float = -3.0
+    relief_classes: tuple[str, ...] = ("beam",)
+    relief_ratio: float = 1.5
+    relief_gap: float = 0.05
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -85,10 +88,12 @@ class DetectionSettings:
             raise ValueError(f"top-reach must be >= 0, got {self.top_reach}")
         if self.side_reach <= 0:
             raise ValueError(f"side-reach must be > 0, got {self.side_reach}")
+        if self.relief_ratio <= 0 or self.relief_gap < 0:
+            raise ValueError(f"relief-ratio must be > 0 and relief-gap >= 0, got {self.relief_ratio}, {self.relief_gap}")
         if self.face_grow < 0:
             raise ValueError(f"face-grow must be >= 0, got {self.face_grow}")
         for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes", "top_classes",
-                     "opening_classes", "face_classes", "side_classes"):
+                     "opening_classes", "face_classes", "side_classes", "relief_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

@@ -23,6 +23,7 @@ from engine.detection.openings import fit_openings
 from engine.detection.planar import fit_planar
 from engine.detection.pointindex import PointIndex
 from engine.detection.proposals import Proposal
+from engine.detection.relief import flat
 from engine.detection.reveal import refine_reveals
 from engine.detection.settings import DetectionSettings
 from engine.detection.sides import settle_sides
@@ -120,6 +121,12 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                  np.asarray(vol.frame.extent, float))
     if settings.hanging_classes:  # a beam hangs from the ceiling: not one whose top is in the lower half
         keep = ~fallen(cls_all, hi_m, float(vol.frame.extent[2]), settings.hanging_classes)
+        if not keep.all():
+            lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = (
+                a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure))
+    if settings.relief_classes and index is not None:  # a beam stands out from the ceiling beside and below it
+        keep = ~flat(cls_all, lo_m, hi_m, index.points_in_metric, settings.relief_classes, settings.relief_ratio,
+                     settings.relief_gap)
         if not keep.all():
             lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = (
                 a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure))
