@@ -19,12 +19,10 @@ import numpy as np
 from engine.crf.graph import build_graph, energies
 from engine.crf.model import CRFSettings, CRFWeights
 from engine.crf.solve import fixed_labels, solve_fixed
-from engine.detection.proposals import Proposal
+from engine.detection.proposals import SURE, Proposal
 from tiles.classes import ELEMENT_CLASSES
 from tiles.tasks import run_tasks
 
-#: Key of ``Proposal.extra`` marking a proposal the CRF keeps whatever its score (engine.detection.sides).
-SURE = "sure"
 #: Key of ``Proposal.extra`` where the CRF leaves each proposal's contextual score (:func:`flip_margins`).
 MARGIN = "crf_margin"
 

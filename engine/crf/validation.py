@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from engine.crf.apply import SURE, select_space
+from engine.crf.apply import select_space
 from engine.crf.labels import proposal_labels
 from engine.crf.model import N_CLASSES, CRFSettings, CRFWeights
-from engine.detection.proposals import Proposal
+from engine.detection.proposals import SURE, Proposal
 from engine.detection.rescore import building_folds
 from engine.metrics.precision import average_precision
 from tiles.classes import ELEMENT_CLASSES

@@ -23,6 +23,10 @@ import numpy as np
 
 from tiles.classes import CLASS_NAMES
 
+#: Key of :attr:`Proposal.extra` marking a proposal kept whatever its score: a wall added at a side of its space
+#: (:mod:`engine.detection.sides`); the CRF keeps it, the space update does not read it as evidence of a wall.
+SURE = "sure"
+
 
 @dataclass
 class Proposal:

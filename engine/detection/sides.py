@@ -11,7 +11,7 @@ space's box (the canonical frame's ``x`` and ``y`` ends; :func:`side_of`: thin a
 ``side-reach`` metres of it) that scores above ``side-floor`` is a candidate (:func:`side_windows`).  After the box
 fit and the re-ranking, a side where no detection of the class scores above 0 gets its best detection of the class
 there, candidate or not (:func:`settle_sides`).  Such a detection is *sure*: the CRF keeps it whatever its score
-(``Proposal.extra["sure"]``), as it keeps a space's ceiling and floor; its score stays the detector's, so it ranks
+(:data:`engine.detection.proposals.SURE`), as it keeps a space's ceiling and floor; its score stays the detector's, so it ranks
 below the walls the detector believes, and the space update does not split or keep
 spaces apart on it (``engine.spaces.update.wall_boxes``).  Measurements: ``docs/experiments/detection.md``, "A wall on every side".
 """

@@ -22,7 +22,7 @@ from engine.detection.model import Model
 from engine.detection.openings import fit_openings
 from engine.detection.planar import fit_planar
 from engine.detection.pointindex import PointIndex
-from engine.detection.proposals import Proposal
+from engine.detection.proposals import SURE, Proposal
 from engine.detection.relief import flat
 from engine.detection.reveal import refine_reveals
 from engine.detection.settings import DetectionSettings
@@ -103,9 +103,7 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         score = model.rescorer.apply(score, cls_all, lo_m, hi_m, sample,
                                      np.asarray(vol.frame.extent, float))
     keep, sure = side_walls(lo, hi, score, cls_all, candidate, grid, settings)
-    if not keep.all():
-        lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = (
-            a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure))
+    lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(keep, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure)
     if settings.refine and index is not None and settings.planar_classes:
         # the depth of boards on walls from their points, after the scores (engine/detection/planar.py)
         fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
@@ -121,16 +119,19 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
                  np.asarray(vol.frame.extent, float))
     if settings.hanging_classes:  # a beam hangs from the ceiling: not one whose top is in the lower half
         keep = ~fallen(cls_all, hi_m, float(vol.frame.extent[2]), settings.hanging_classes)
-        if not keep.all():
-            lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = (
-                a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure))
+        lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(keep, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat,
+                                                                    sure)
     if settings.relief_classes and index is not None:  # a beam stands out from the ceiling beside and below it
         keep = ~flat(cls_all, lo_m, hi_m, index.points_in_metric, settings.relief_classes, settings.relief_ratio,
                      settings.relief_gap)
-        if not keep.all():
-            lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = (
-                a[keep] for a in (lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure))
+        lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(keep, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat,
+                                                                    sure)
     return Detections(lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure)
+
+
+def kept(keep: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``arrays`` (one row per detection) cut to the rows ``keep``: the same arrays when every row is kept."""
+    return arrays if keep.all() else tuple(a[keep] for a in arrays)
 
 
 def side_walls(lo: np.ndarray, hi: np.ndarray, score: np.ndarray, class_code: np.ndarray, candidate: np.ndarray,
@@ -169,7 +170,7 @@ def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,
         out.append(Proposal(space_id=int(space_id), class_code=int(det.class_code[i]), score=float(det.score[i]),
                             position=p, size=s, occupancy=atoms[int(det.atom[i])].occupancy.copy(),
                             center=center, world_size=size, yaw=float(yaw),
-                            extra={"atom": int(det.atom[i]), **({"sure": True} if sure[i] else {})}))
+                            extra={"atom": int(det.atom[i]), **({SURE: True} if sure[i] else {})}))
     return out
 
 

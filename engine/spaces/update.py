@@ -19,6 +19,7 @@ import networkx as nx
 import numpy as np
 
 from engine import config
+from engine.detection.proposals import SURE
 from engine.spaces.alignment import Frame
 from engine.spaces.document import DOC, Face, Neighbour, Space, SpaceParse
 from tiles.classes import CLASS_CODES
@@ -62,18 +63,18 @@ class UpdateSettings:
 def wall_boxes(walls: Sequence[Any]) -> np.ndarray:
     """``(n, 7)`` ``[cx, cy, cz, dx, dy, dz, yaw]`` of the walls among Proposals or ``elements.json`` records.
 
-    A wall added at a side of its space because the space ends there (``extra["sure"]``,
+    A wall added at a side of its space because the space ends there (``extra[SURE]``,
     :mod:`engine.detection.sides`) is no evidence that it ends there: it is left out."""
     rows = []
     for w in walls:
         if isinstance(w, dict):
             code = int(w.get("class_code", CLASS_CODES.get(str(w.get("class", "")), -1)))
             box = [*w["center"], *w["size"], float(w.get("yaw", 0.0))]
-            sure = bool(w.get("extra", {}).get("sure"))
+            sure = bool(w.get("extra", {}).get(SURE))
         else:
             code = int(w.class_code)
             box = [*w.center, *w.world_size, float(w.yaw)]
-            sure = bool(w.extra.get("sure"))
+            sure = bool(w.extra.get(SURE))
         if code == WALL and not sure:
             rows.append(box)
     return np.asarray(rows, dtype=np.float64).reshape(-1, 7)

@@ -205,7 +205,7 @@ def test_a_spaces_ceiling_and_floor_are_kept_whatever_their_score():
 def test_a_sure_proposal_is_kept_whatever_its_score():
     """A wall added at a side of its space (``extra["sure"]``, engine.detection.sides) is kept as a space's ceiling
     is: by the detector's decision and by a CRF that would drop it; a wall beside it with the same score is not."""
-    from engine.crf.apply import SURE
+    from engine.detection.proposals import SURE
 
     sure = prop(WALL, [0.0, 0.1, 0], [0.05, 0.8, 1], -1.2)
     sure.extra[SURE] = True

@@ -61,7 +61,7 @@ def test_a_side_gets_a_sure_wall_only_where_no_wall_is_believed():
 def test_every_side_of_a_space_gets_a_sure_wall(buildings, trained):
     """Scores no window reaches: the space still gets its ceiling, its floor and one wall on each side of its box
     that holds one (``side-floor`` below every score), each marked sure; without ``side-classes`` none."""
-    from engine.crf.apply import SURE
+    from engine.detection.proposals import SURE
     from engine.detection.space import detect_space
     from engine.spaces.points import index_spaces, load_space
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from engine.detection.proposals import SURE
 from engine.spaces.alignment import Frame
 from engine.spaces.document import Face, SpaceParse
 from engine.spaces.update import UpdateSettings, face_coverage, merge_mapping, separated_pairs, update_spaces
@@ -232,7 +233,7 @@ def test_face_coverage_rules(yaw):
     chair = dict(_wall(frame, 8.1, 2.0, 0.2, 4.0), class_code=8, **{"class": "chair"})
     assert cov(chair) == 0.0  # only walls
     # a wall added at its space's side because the space ends there (engine.detection.sides) is no evidence
-    sure = dict(_wall(frame, 8.1, 2.0, 0.2, 4.0), extra={"sure": True})
+    sure = dict(_wall(frame, 8.1, 2.0, 0.2, 4.0), extra={SURE: True})
     assert cov(sure) == 0.0
 
 
