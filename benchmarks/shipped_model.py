@@ -72,6 +72,36 @@ def tight_boxes(store, elements: list[dict]) -> list[dict]:
     return out
 
 
+def held_out(model, client, tmp: str, seeds: list[int], area: float, stores: list[str] | None = None,
+             tight: bool = False, styles: str = "classic") -> tuple[list, list[dict]]:
+    """The proposals of held-out buildings (generated in ``tmp`` with ``seeds``, or the tile ``stores``), detected
+    in their ground-truth spaces, and their elements; the buildings are set 100 km apart and their spaces
+    numbered apart, so that nothing matches across buildings."""
+    from engine.detection.detect import detect
+    from engine.synth import generate
+    from engine.training.synthetic import synthetic_yaw
+    from tiles.store import open_store
+
+    paths = list(stores or [])
+    for s in ([] if stores else seeds):
+        out = os.path.join(tmp, f"b{s}.zarr")
+        generate(out, seed=s, area_m2=area, yaw=synthetic_yaw(s), client=client, styles=styles)
+        paths.append(out)
+    props, gts = [], []
+    for i, path in enumerate(paths):
+        st = open_store(path)
+        found = detect(st, model=model, client=client, space_array="gt_space")
+        offset = 1_000_000 * i  # distinct spaces per building, far apart: no match across buildings
+        for p in found:
+            p.space_id += offset
+            p.center = p.center + np.array([1e5 * i, 0.0, 0.0])
+        props += found
+        elements = st.doc("ground_truth")["elements"]
+        for g in (tight_boxes(st, elements) if tight else elements):
+            gts.append(dict(g, space=int(g["space"]) + offset, center=[g["center"][0] + 1e5 * i, *g["center"][1:]]))
+    return props, gts
+
+
 def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list[str] | None = None,
              tight: bool = False, styles: str = "classic") -> dict:
     """Per-class AP (fractions) of the four rankings, keyed by their names, plus ``seconds``."""
@@ -79,12 +109,8 @@ def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list
 
     from engine.crf.apply import apply_crf, rescored
     from engine.crf.model import CRFWeights
-    from engine.detection.detect import detect
     from engine.detection.model import load_model
     from engine.metrics.detection import evaluate_detections
-    from engine.synth import generate
-    from engine.training.synthetic import synthetic_yaw
-    from tiles.store import open_store
 
     model = load_model(model_path)
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
@@ -93,24 +119,7 @@ def evaluate(model_path: str | None, seeds: list[int], area: float, stores: list
     t0 = time.perf_counter()
     try:
         with tempfile.TemporaryDirectory(prefix="bp-heldout-") as tmp:
-            paths = list(stores or [])
-            for s in ([] if stores else seeds):
-                out = os.path.join(tmp, f"b{s}.zarr")
-                generate(out, seed=s, area_m2=area, yaw=synthetic_yaw(s), client=client, styles=styles)
-                paths.append(out)
-            props, gts = [], []
-            for i, path in enumerate(paths):
-                st = open_store(path)
-                found = detect(st, model=model, client=client, space_array="gt_space")
-                offset = 1_000_000 * i  # distinct spaces per building, far apart: no match across buildings
-                for p in found:
-                    p.space_id += offset
-                    p.center = p.center + np.array([1e5 * i, 0.0, 0.0])
-                props += found
-                elements = st.doc("ground_truth")["elements"]
-                for g in (tight_boxes(st, elements) if tight else elements):
-                    gts.append(dict(g, space=int(g["space"]) + offset,
-                                    center=[g["center"][0] + 1e5 * i, *g["center"][1:]]))
+            props, gts = held_out(model, client, tmp, seeds, area, stores, tight, styles)
             out = {"detector, ranked": evaluate_detections(props, gts, client=client),
                    "detector, set (score > 0)": evaluate_detections([p for p in props if p.score > 0], gts,
                                                                     client=client)}

@@ -4,11 +4,13 @@ Defaults, with the reason for each value: ``engine/detection/detection.yaml``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
+import numpy as np
+
 from engine import config
-from tiles.classes import element_class_list
+from tiles.classes import ELEMENT_CLASSES, element_class_list
 
 #: How a space's one ceiling and floor are chosen among their windows (:func:`engine.detection.surfaces.surface_order`).
 SURFACE_CHOICES = ("extreme", "halves", "score")
@@ -60,6 +62,7 @@ class DetectionSettings:
     relief_classes: tuple[str, ...] = ("beam",)
     relief_ratio: float = 1.5
     relief_gap: float = 0.05
+    cut: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -92,6 +95,9 @@ class DetectionSettings:
             raise ValueError(f"relief-ratio must be > 0 and relief-gap >= 0, got {self.relief_ratio}, {self.relief_gap}")
         if self.face_grow < 0:
             raise ValueError(f"face-grow must be >= 0, got {self.face_grow}")
+        unknown = set(self.cut) - set(ELEMENT_CLASSES)
+        if unknown:
+            raise ValueError(f"cut names unknown classes {sorted(unknown)}")
         for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes", "top_classes",
                      "opening_classes", "face_classes", "side_classes", "relief_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
@@ -102,6 +108,10 @@ class DetectionSettings:
         kw = config.settings_fields(cls, "detection")
         kw.update(overrides)
         return cls(**kw)
+
+    def cut_array(self) -> np.ndarray:
+        """The kept set's cut per class code (``cut``; 0 for a class it does not name)."""
+        return np.array([float(self.cut.get(c, 0.0)) for c in ELEMENT_CLASSES])
 
     def to_json(self) -> dict[str, Any]:
         return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v) for f in fields(self)}

@@ -102,6 +102,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     if settings.refine and index is not None and model.rescorer is not None and settings.rescore:
         score = model.rescorer.apply(score, cls_all, lo_m, hi_m, sample,
                                      np.asarray(vol.frame.extent, float))
+    if settings.cut:  # the kept set's cut per class: a positive score still means kept
+        score = score - settings.cut_array()[cls_all]
     keep, sure = side_walls(lo, hi, score, cls_all, candidate, grid, settings)
     lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(keep, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure)
     if settings.refine and index is not None and settings.planar_classes:

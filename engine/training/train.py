@@ -78,8 +78,8 @@ def train_with_samples(stores: list[Any], *, client=None, settings: TrainSetting
     """
     settings = settings or TrainSettings.from_config()
     # the planar fit moves final boxes after their scores and re-ranking: the refiners learn on the boxes they
-    # are applied to, without it
-    det_run = dataclasses.replace(detection or DetectionSettings.from_config(), planar_classes=())
+    # are applied to, without it; and on the scores before the kept set's cut (applied after the re-ranking)
+    det_run = dataclasses.replace(detection or DetectionSettings.from_config(), planar_classes=(), cut={})
     # mining scans every training space each round: a coarser cap on the stride than at run time
     det = dataclasses.replace(det_run, max_stride=max(det_run.max_stride, settings.max_stride))
     t0 = time.perf_counter()

@@ -32,3 +32,14 @@ def test_refine_band_setting():
     assert DetectionSettings(refine_band="noise").to_json()["refine_band"] == "noise"
     with pytest.raises(ValueError, match="refine-band"):
         DetectionSettings(refine_band="3")
+
+
+def test_cut_setting():
+    """``cut``: the kept set's cut per class (0 for the classes it does not name); unknown classes refused."""
+    shipped = DetectionSettings.from_config()
+    assert shipped.cut == {"window": -1.0}
+    arr = shipped.cut_array()
+    assert arr[5] == -1.0 and (arr[[0, 1, 2, 3, 4, 6, 7, 8, 9, 10, 11]] == 0).all()
+    assert (DetectionSettings(cut={}).cut_array() == 0).all()
+    with pytest.raises(ValueError, match="cut"):
+        DetectionSettings(cut={"windows": -1.0})

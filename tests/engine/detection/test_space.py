@@ -100,6 +100,26 @@ def test_a_models_rescorer_replaces_its_classes_scores(buildings, trained):
             assert b.score == a.score
 
 
+def test_a_classes_cut_lowers_its_scores_by_it_and_no_other(buildings, trained):
+    """``cut``: a class's final scores are lowered by its cut (a cut of -1 raises them by 1), so that a detection
+    scored above the cut is kept downstream (score > 0); the other classes' scores and every box stay."""
+    from engine.detection.space import detect_space
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    ref = max(index_spaces(store, "gt_space"), key=lambda r: r.count)
+    pts = load_space(store, ref, "gt_space")
+    plain = detect_space(pts, trained, DetectionSettings.from_config(cut={}))
+    cut = detect_space(pts, trained, DetectionSettings.from_config(cut={"wall": -1.0, "floor": 0.5}))
+    assert [p.class_code for p in plain] == [p.class_code for p in cut] and len(plain) > 3
+    assert {p.class_code for p in plain} >= {CLASS_CODES["wall"], CLASS_CODES["floor"], CLASS_CODES["ceiling"]}
+    want = {CLASS_CODES["wall"]: 1.0, CLASS_CODES["floor"]: -0.5}
+    for a, b in zip(plain, cut):
+        assert b.score == pytest.approx(a.score + want.get(a.class_code, 0.0))
+        np.testing.assert_allclose(b.world_size, a.world_size)
+
+
 def test_feature_points_subsamples_the_point_statistics_of_the_re_ranking(buildings, trained):
     """``feature-points`` caps the points the re-ranking's statistics read around a box: far above any box's points
     it changes nothing, a small cap changes the statistics (and so the scores) but never the boxes."""

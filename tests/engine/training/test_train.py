@@ -77,13 +77,15 @@ def test_the_training_rules_of_the_shipped_model_are_the_configured_ones(trained
         assert (TrainSettings.from_config().relative_ratio, TrainSettings.from_config().mining) == (None, "random")
 
 
-def test_training_detects_without_the_planar_fit(trained):
+def test_training_detects_without_the_planar_fit_and_the_kept_sets_cut(trained):
     """The planar fit moves boxes after their scores and re-ranking: the box regression and the re-ranking learn on
-    the boxes they are applied to, so training's own detection passes leave it out, whatever the settings say."""
+    the boxes they are applied to, so training's own detection passes leave it out, whatever the settings say; and
+    they learn on the scores before the kept set's cut (``cut``, applied after the re-ranking)."""
     from engine.detection.settings import DetectionSettings
 
     assert DetectionSettings.from_config().planar_classes == ("board",)
-    assert trained[2].detection["planar_classes"] == []
+    assert DetectionSettings.from_config().cut == {"window": -1.0}
+    assert trained[2].detection["planar_classes"] == [] and trained[2].detection["cut"] == {}
 
 
 def test_hardest_mining_takes_the_highest_scoring_fresh_violators(trained):
