@@ -12,9 +12,17 @@ the box grown by :data:`DEPTH` metres, searched ``opening-grow`` metres beyond t
 :data:`VERTICAL` metres above and below it.  In a grid of :data:`CELL` cells of the wall's plane, a cell with a
 point within :data:`FACE` of the face is wall; one without, but with a point deeper than that (away from the
 room), is open.  The connected open region that covers most of the detection's box is the opening, and the box
-takes its width and height, side by side, unless the region reaches the edge of the search there (it runs on:
-the wall is not seen, or the opening is not a window).  A region covering under :data:`MIN_SHARE` of the box
-leaves it as it is.  Settings: ``buildingparser.detection.opening-*``.
+takes its width and height, side by side.  A region covering under :data:`MIN_SHARE` of the box leaves it as it is.
+
+A region that reaches the end of the search along the wall may be a ribbon window longer than the search: the
+search then runs on along the wall, over the whole space, column of cells by column (:func:`run_along`), as long as
+each column is a window's: open over at least half of the opening's height and, where the search reaches above or
+below it, wall over at least half of those cells (a wall drifting off the face's plane is open above and below
+too).  The ribbon's pieces that the detector found, each a training window's width, then make one detection:
+of the followed detections whose fitted boxes overlap by more than ``nms-iou``, the best-scored, as the union of
+their boxes along the wall and in height (:func:`one_per_opening`, called by :mod:`engine.detection.space`); the
+detections not followed are left alone (a box fitted wrongly must not grow a good one).  A side still at the end
+of the search (not the space's) keeps the box's.  Settings: ``buildingparser.detection.opening-*``.
 """
 from __future__ import annotations
 
@@ -23,6 +31,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy import ndimage
 
+from engine.detection.sliding import box_iou
 from tiles.classes import ELEMENT_CLASSES
 
 #: Metres the box grows along the wall's normal, so that the wall's face is in it.
@@ -41,11 +50,13 @@ MIN_POINTS = 50
 
 def fit_openings(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
                  points_in_metric: Callable[[np.ndarray, np.ndarray], np.ndarray], classes: tuple[str, ...],
-                 grow: float, extent: np.ndarray) -> None:
+                 grow: float, extent: np.ndarray) -> np.ndarray:
     """Set in place the width and height (canonical metres) of the detections of ``classes`` to their opening's
-    (see the module doc); ``extent``: the space's size in canonical metres."""
+    (see the module doc); ``extent``: the space's size in canonical metres.  Returns whether each detection's
+    opening was followed along the wall past the search (a ribbon's)."""
     codes = [ELEMENT_CLASSES.index(c) for c in classes]
     ext = np.asarray(extent, dtype=np.float64)
+    followed = np.zeros(len(lo_m), dtype=bool)
     for i in np.nonzero(np.isin(np.asarray(class_code), codes))[0]:
         a = 0 if hi_m[i, 0] - lo_m[i, 0] <= hi_m[i, 1] - lo_m[i, 1] else 1  # the wall's normal
         b = 1 - a
@@ -63,8 +74,18 @@ def fit_openings(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
                             (lo_m[i, b], hi_m[i, b]), (lo_m[i, 2], hi_m[i, 2]), (0.0, ext[b]), (0.0, ext[2]))
         if found is None:
             continue
-        (b0, b1), (z0, z1) = found
+        (b0, b1), (z0, z1), face, runs = found
+        if runs[0] or runs[1]:  # a ribbon longer than the search: follow it along the wall
+            wlo, whi = rlo.copy(), rhi.copy()
+            wlo[b], whi[b] = 0.0, ext[b]
+            w = points_in_metric(wlo, whi)
+            w = w[np.all((w >= wlo) & (w <= whi), axis=1)]
+            ends = run_along(w[:, a], behind, face, w[:, b], w[:, 2], (b0, b1), (z0, z1), (rlo[2], rhi[2]), runs,
+                             ext[b])
+            followed[i] = ends[0] < b0 or ends[1] > b1
+            b0, b1 = ends
         lo_m[i, b], hi_m[i, b], lo_m[i, 2], hi_m[i, 2] = b0, b1, z0, z1
+    return followed
 
 
 def cells(span: tuple[float, float], origin: float, n: int) -> slice:
@@ -76,23 +97,17 @@ def cells(span: tuple[float, float], origin: float, n: int) -> slice:
 def opening_box(depth: np.ndarray, behind: int, u: np.ndarray, z: np.ndarray, u_range: tuple[float, float],
                 z_range: tuple[float, float], box_u: tuple[float, float], box_z: tuple[float, float],
                 space_u: tuple[float, float], space_z: tuple[float, float]
-                ) -> tuple[tuple[float, float], tuple[float, float]] | None:
+                ) -> tuple[tuple[float, float], tuple[float, float], float, tuple[bool, bool]] | None:
     """The opening's ``(u0, u1), (z0, z1)`` in the wall's plane (a side that reaches the search's edge, short of
-    the space's, keeps the box's), or None; ``behind`` (-1 or +1): the direction of ``depth`` away from the room;
-    the other arguments as :func:`fit_openings` finds them."""
+    the space's, keeps the box's), the face's depth and whether its two ends along the wall run on so; or None.
+    ``behind`` (-1 or +1): the direction of ``depth`` away from the room; the other arguments as
+    :func:`fit_openings` finds them."""
     hist, edges = np.histogram(depth, bins=max(1, int(np.ceil((depth.max() - depth.min()) / 0.01))))
     k = int(np.argmax(hist))
     face = 0.5 * (edges[k] + edges[k + 1])
     nu = max(1, int(np.ceil((u_range[1] - u_range[0]) / CELL)))
     nz = max(1, int(np.ceil((z_range[1] - z_range[0]) / CELL)))
-    iu = np.clip(((u - u_range[0]) / CELL).astype(np.int64), 0, nu - 1)
-    iz = np.clip(((z - z_range[0]) / CELL).astype(np.int64), 0, nz - 1)
-    near = np.abs(depth - face) <= FACE
-    wall = np.zeros((nu, nz), dtype=bool)
-    wall[iu[near], iz[near]] = True
-    deeper = (face - depth if behind < 0 else depth - face) > FACE  # in the reveal, away from the room
-    seen = np.zeros((nu, nz), dtype=bool)
-    seen[iu[deeper], iz[deeper]] = True
+    wall, seen = face_cells(depth, behind, face, u, z, u_range[0], z_range[0], nu, nz)
     labels, count = ndimage.label(seen & ~wall)
     if count == 0:
         return None
@@ -106,12 +121,78 @@ def opening_box(depth: np.ndarray, behind: int, u: np.ndarray, z: np.ndarray, u_
     u0, u1 = u_range[0] + su.start * CELL, u_range[0] + su.stop * CELL
     z0, z1 = z_range[0] + sz.start * CELL, z_range[0] + sz.stop * CELL
     # a side at the edge of the search (not the space's) runs on: keep the box's there
-    if su.start == 0 and u_range[0] > space_u[0] + 1e-9:
+    runs = (su.start == 0 and u_range[0] > space_u[0] + 1e-9, su.stop == nu and u_range[1] < space_u[1] - 1e-9)
+    if runs[0]:
         u0 = box_u[0]
-    if su.stop == nu and u_range[1] < space_u[1] - 1e-9:
+    if runs[1]:
         u1 = box_u[1]
     if sz.start == 0 and z_range[0] > space_z[0] + 1e-9:
         z0 = box_z[0]
     if sz.stop == nz and z_range[1] < space_z[1] - 1e-9:
         z1 = box_z[1]
-    return (u0, u1), (z0, z1)
+    return (u0, u1), (z0, z1), face, runs
+
+
+def face_cells(depth: np.ndarray, behind: int, face: float, u: np.ndarray, z: np.ndarray, u_origin: float,
+               z_origin: float, nu: int, nz: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two ``(nu, nz)`` grids of :data:`CELL` cells from the origins: a point within :data:`FACE` of the face
+    (wall), a point deeper than that, away from the room (seen in the reveal)."""
+    iu = np.clip(((u - u_origin) / CELL).astype(np.int64), 0, nu - 1)
+    iz = np.clip(((z - z_origin) / CELL).astype(np.int64), 0, nz - 1)
+    near = np.abs(depth - face) <= FACE
+    wall = np.zeros((nu, nz), dtype=bool)
+    wall[iu[near], iz[near]] = True
+    deeper = (face - depth if behind < 0 else depth - face) > FACE
+    seen = np.zeros((nu, nz), dtype=bool)
+    seen[iu[deeper], iz[deeper]] = True
+    return wall, seen
+
+
+def run_along(depth: np.ndarray, behind: int, face: float, u: np.ndarray, z: np.ndarray, found_u: tuple[float, float],
+              found_z: tuple[float, float], z_range: tuple[float, float], runs: tuple[bool, bool],
+              length: float) -> tuple[float, float]:
+    """The ends along the wall of an opening found over ``found_u`` x ``found_z`` (an end that ``runs`` on is the
+    box's), followed from there column by column over the wall's points (``u`` from 0 to ``length``) while each
+    column is open over half of ``found_z`` at least and, where ``z_range`` reaches beyond ``found_z``, wall over
+    half of those cells at least; or to the wall's end."""
+    nu = max(1, int(np.ceil(length / CELL)))
+    nz = max(1, int(np.ceil((z_range[1] - z_range[0]) / CELL)))
+    wall, seen = face_cells(depth, behind, face, u, z, 0.0, z_range[0], nu, nz)
+    zc = z_range[0] + (np.arange(nz) + 0.5) * CELL
+    band = (zc >= found_z[0]) & (zc <= found_z[1])
+    open_share = (seen & ~wall)[:, band].mean(axis=1) if band.any() else np.zeros(nu)
+    wall_share = wall[:, ~band].mean(axis=1) if (~band).any() else np.ones(nu)
+    window = (open_share >= 0.5) & (wall_share >= 0.5)
+    lo = int(np.clip(np.floor(found_u[0] / CELL), 0, nu - 1))
+    hi = int(np.clip(np.ceil(found_u[1] / CELL), lo + 1, nu))  # columns [lo, hi)
+    if runs[0]:
+        while lo > 0 and window[lo - 1]:
+            lo -= 1
+    if runs[1]:
+        while hi < nu and window[hi]:
+            hi += 1
+    return (lo * CELL if runs[0] else found_u[0]), (min(hi * CELL, length) if runs[1] else found_u[1])
+
+
+def one_per_opening(lo_m: np.ndarray, hi_m: np.ndarray, score: np.ndarray, followed: np.ndarray,
+                    iou: float) -> np.ndarray:
+    """Keep mask: of the ``followed`` detections (:func:`fit_openings`: a ribbon's pieces, each fitted to its one
+    opening) whose boxes overlap by more than ``iou`` with a better one, the best-scored one, which takes in place
+    the union of their boxes along the wall and in height (each piece found the opening's height from its own
+    stretch of the wall); every other detection is kept as it is."""
+    keep = np.ones(len(score), dtype=bool)
+    idx = np.nonzero(np.asarray(followed, dtype=bool))[0]
+    alive = np.ones(len(idx), dtype=bool)
+    for k in np.lexsort((idx, -np.asarray(score)[idx])):
+        if not alive[k]:
+            continue
+        i = idx[k]
+        group = alive & (box_iou(lo_m[i], hi_m[i], lo_m[idx], hi_m[idx])[0] > iou)
+        group[k] = True
+        a = 0 if hi_m[i, 0] - lo_m[i, 0] <= hi_m[i, 1] - lo_m[i, 1] else 1  # the wall's normal: the best's depth
+        for ax in (1 - a, 2):
+            lo_m[i, ax], hi_m[i, ax] = lo_m[idx[group], ax].min(), hi_m[idx[group], ax].max()
+        alive &= ~group
+        keep[idx[group]] = False
+        keep[i] = True
+    return keep

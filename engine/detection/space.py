@@ -19,7 +19,7 @@ from engine.detection.candidates import class_windows, side_reach, window_candid
 from engine.detection.canonical import CanonicalFrame, estimate_frame
 from engine.detection.faces import fit_faces
 from engine.detection.model import Model
-from engine.detection.openings import fit_openings
+from engine.detection.openings import fit_openings, one_per_opening
 from engine.detection.planar import fit_planar
 from engine.detection.pointindex import PointIndex
 from engine.detection.proposals import SURE, Proposal
@@ -114,8 +114,11 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         fit_faces(lo_m, hi_m, cls_all, index.points_in_metric, settings.face_classes, settings.face_grow,
                   np.asarray(vol.frame.extent, float))
     if settings.refine and index is not None and settings.opening_classes:  # windows as their openings
-        fit_openings(lo_m, hi_m, cls_all, index.points_in_metric, settings.opening_classes, settings.opening_grow,
-                     np.asarray(vol.frame.extent, float))
+        followed = fit_openings(lo_m, hi_m, cls_all, index.points_in_metric, settings.opening_classes,
+                                settings.opening_grow, np.asarray(vol.frame.extent, float))
+        keep = one_per_opening(lo_m, hi_m, score, followed, settings.nms_iou)  # a ribbon's pieces make one
+        lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(keep, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat,
+                                                                    sure)
     if settings.refine and index is not None and settings.top_classes:  # bookcases as tall as their points
         fit_tops(lo_m, hi_m, cls_all, index.points_in_metric, settings.top_classes, settings.top_reach,
                  np.asarray(vol.frame.extent, float))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.detection.openings import fit_openings
+from engine.detection.openings import fit_openings, one_per_opening
 from engine.detection.settings import DetectionSettings
 from tiles.classes import ELEMENT_CLASSES
 
@@ -42,11 +42,7 @@ def test_no_opening_under_the_box_or_one_that_runs_on_leaves_it():
     lo, hi = np.array([[2.8, 0.05, 0.8]]), np.array([[4.3, 0.37, 2.2]])
     fit_openings(lo, hi, np.array([WINDOW]), _query(solid), ("window",), 1.5, EXTENT)
     assert np.allclose(lo, [[2.8, 0.05, 0.8]]) and np.allclose(hi, [[4.3, 0.37, 2.2]])
-    # an opening wider than the search along the wall: those sides stay; the top and bottom are found
     wide = _wall_with_window(rng, 0.5, 7.5, 0.9, 2.1)
-    lo, hi = np.array([[3.0, 0.05, 0.8]]), np.array([[4.5, 0.37, 2.2]])
-    fit_openings(lo, hi, np.array([WINDOW]), _query(wide), ("window",), 1.0, EXTENT)
-    assert np.allclose([lo[0, 0], hi[0, 0]], [3.0, 4.5]) and np.allclose([lo[0, 2], hi[0, 2]], [0.9, 2.1], atol=0.06)
     # other classes are left alone
     lo, hi = np.array([[2.8, 0.05, 0.8]]), np.array([[4.3, 0.37, 2.2]])
     fit_openings(lo, hi, np.array([ELEMENT_CLASSES.index("door")]), _query(wide), ("window",), 1.5, EXTENT)
@@ -70,3 +66,43 @@ def test_opening_settings():
     assert DetectionSettings.from_config(opening_classes="").opening_classes == ()
     with pytest.raises(ValueError, match="opening-grow"):
         DetectionSettings(opening_grow=-1.0)
+
+
+def test_a_ribbon_longer_than_the_search_is_followed_along_the_wall():
+    """An opening wider than the search (7 m, searched 1 m beyond a 1.5 m box) is followed column by column to its
+    ends; a wall that drifts off the face's plane beyond a window (open above and below it too: a bowed wall, a
+    frame a little off) is not a window, and the run stops where the wall stops being one."""
+    rng = np.random.default_rng(3)
+    wide = _wall_with_window(rng, 0.5, 7.5, 0.9, 2.1)
+    lo, hi = np.array([[3.0, 0.05, 0.8]]), np.array([[4.5, 0.37, 2.2]])
+    fit_openings(lo, hi, np.array([WINDOW]), _query(wide), ("window",), 1.0, EXTENT)
+    assert np.allclose([lo[0, 0], hi[0, 0], lo[0, 2], hi[0, 2]], [0.5, 7.5, 0.9, 2.1], atol=0.06)
+    # from x = 5.5 on, the whole wall lies 6 cm deeper than its face (it drifts away): the ribbon ends at 6.0
+    drift = _wall_with_window(rng, 1.0, 6.0, 0.9, 2.1)
+    far = (drift[:, 0] > 5.5) & (drift[:, 1] > 0.3)
+    drift[far, 1] -= 0.06
+    lo, hi = np.array([[2.0, 0.05, 0.8]]), np.array([[3.5, 0.37, 2.2]])
+    fit_openings(lo, hi, np.array([WINDOW]), _query(drift), ("window",), 1.0, EXTENT)
+    assert np.allclose([lo[0, 0], lo[0, 2], hi[0, 2]], [1.0, 0.9, 2.1], atol=0.06)
+    assert 5.4 <= hi[0, 0] <= 6.05
+
+
+def test_the_pieces_of_one_opening_keep_the_best():
+    """Followed detections (a ribbon's pieces, each fitted to the whole ribbon) whose boxes overlap keep the
+    best-scored, as the union of their boxes along the wall and in height (its own depth); boxes apart, and
+    detections not followed, stay as they are."""
+    lo = np.array([[0.5, 0.0, 0.9], [0.5, 0.0, 1.0], [0.52, 0.0, 0.85], [0.5, 0.0, 0.9], [5.0, 0.0, 0.9]])
+    hi = np.array([[7.5, 0.3, 2.1], [7.4, 0.3, 2.1], [7.5, 0.32, 2.1], [7.5, 0.3, 2.1], [6.0, 0.3, 2.1]])
+    followed = np.array([True, True, True, False, True])
+    keep = one_per_opening(lo, hi, np.array([1.0, 3.0, 2.0, 5.0, 0.5]), followed, 0.3)
+    assert keep.tolist() == [False, True, False, True, True]
+    assert np.allclose(lo[1], [0.5, 0.0, 0.85]) and np.allclose(hi[1], [7.5, 0.3, 2.1])  # the union, its depth
+    assert np.allclose(hi[4], [6.0, 0.3, 2.1]) and np.allclose(lo[3], [0.5, 0.0, 0.9])
+
+
+def test_fit_openings_says_which_openings_it_followed():
+    rng = np.random.default_rng(4)
+    pts = _wall_with_window(rng, 0.5, 7.5, 0.9, 2.1)
+    lo, hi = np.array([[3.0, 0.05, 0.8], [0.6, 0.05, 0.9]]), np.array([[4.5, 0.37, 2.2], [7.4, 0.37, 2.1]])
+    followed = fit_openings(lo, hi, np.array([WINDOW, WINDOW]), _query(pts), ("window",), 1.0, EXTENT)
+    assert followed.tolist() == [True, False]  # the second box's search holds the whole opening
