@@ -48,7 +48,7 @@ bench-quick: $(STAMP)
 # learn on fitted boards); with a space's ceiling and floor proposed only above score-threshold, beams kept
 # wherever they are, no class kept whatever its score (train-crf's validation), and a surface's box its points'
 # +- 3 sigma noise band (refine-band), as then; and bookcases' tops, windows' and boards' sizes as the detector
-# gives them (top-classes, opening-classes, face-classes); no wall added at a space's sides (side-classes), beams kept flat or not
+# gives them (top-classes, opening-classes, face-classes, footprint-classes); no wall added at a space's sides (side-classes), beams kept flat or not
 # (relief-classes), every class's kept set cut at 0 (cut).
 MODEL_DATA := build/model-data
 MODEL_SEEDS := 1100 1101 1102 1103 1104 1105
@@ -57,6 +57,7 @@ MODEL_ENV := DASK_BUILDINGPARSER__DETECTION__MAX_STRIDE=0.2 DASK_BUILDINGPARSER_
   DASK_BUILDINGPARSER__DETECTION__HANGING_CLASSES= DASK_BUILDINGPARSER__CRF__KEEP_CLASSES= \
   DASK_BUILDINGPARSER__DETECTION__REFINE_BAND=noise DASK_BUILDINGPARSER__DETECTION__TOP_CLASSES= \
   DASK_BUILDINGPARSER__DETECTION__OPENING_CLASSES= DASK_BUILDINGPARSER__DETECTION__FACE_CLASSES= \
+  DASK_BUILDINGPARSER__DETECTION__FOOTPRINT_CLASSES= \
   DASK_BUILDINGPARSER__DETECTION__SIDE_CLASSES= DASK_BUILDINGPARSER__DETECTION__RELIEF_CLASSES= \
   DASK_BUILDINGPARSER__DETECTION__CUT__WINDOW=0
 model: $(STAMP)

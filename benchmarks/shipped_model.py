@@ -14,7 +14,7 @@ set (score > 0), the set the CRF keeps, and all proposals ranked by the CRF's
 contextual score; under the table, the CRF's kept set per class against the elements (``kept/true``: issue 25
 item 5's counts).  Not a ``bench_*`` suite: ``make bench`` does not run it.
 
-``--styles classic varied windows doors subsampled`` evaluates the held-out buildings in each style
+``--styles classic varied windows doors subsampled furniture`` evaluates the held-out buildings in each style
 (``engine.synth`` ``styles``): seen when the model was trained on all its style families (its model JSON
 records them; classic has none), else unseen; side by side, with the gap of their mAP; ``--foreign ../shared/foreign/f11 ...``
 adds the foreign buildings beside them (detected in their ground-truth spaces,
@@ -202,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tight-gt", action="store_true",
                         help="score against the tightest box of each element's points (S3DIS's convention)")
     parser.add_argument("--styles", type=styles_arg, nargs="+", default=["classic"],
-                        help="the held-out buildings' styles (classic, varied, windows, doors, subsampled or a "
+                        help="the held-out buildings' styles (classic, varied, windows, doors, subsampled, furniture or a "
                              "comma-separated combination), each evaluated apart; seen (those whose families the "
                              "model was trained on) and unseen side by side")
     parser.add_argument("--foreign", nargs="+", metavar="DIR",

@@ -24,7 +24,8 @@ STYLES_HELP = ("classic (the shipped model's training buildings' styles; default
                "of style families: varied (boards bare or with a tray; saturated, dark, noisier, sparser and denser "
                "rooms), subsampled (each room's scan voxel-subsampled on a 1-5 cm grid), windows (punched, ribbon, "
                "full-height and tall windows, with or without mullions and sill), doors (flush, glazed and sliding doors "
-               "beside classic ones); the plan of spaces stays the same")
+               "beside classic ones), furniture (chairs on five-star bases, cantilever chairs, armchairs, stools, wide "
+               "chairs); the plan of spaces stays the same")
 
 
 def styles(text: str) -> str:

@@ -54,6 +54,8 @@ class DetectionSettings:
     min_space_density: float = 0.1
     top_classes: tuple[str, ...] = ("bookcase",)
     top_reach: float = 0.6
+    footprint_classes: tuple[str, ...] = ("chair",)
+    footprint_grow: float = 0.1
     opening_classes: tuple[str, ...] = ("window",)
     opening_grow: float = 1.5
     side_classes: tuple[str, ...] = ("wall",)
@@ -89,6 +91,8 @@ class DetectionSettings:
             raise ValueError(f"opening-grow must be >= 0, got {self.opening_grow}")
         if self.top_reach < 0:
             raise ValueError(f"top-reach must be >= 0, got {self.top_reach}")
+        if self.footprint_grow < 0:
+            raise ValueError(f"footprint-grow must be >= 0, got {self.footprint_grow}")
         if self.side_reach <= 0:
             raise ValueError(f"side-reach must be > 0, got {self.side_reach}")
         if self.relief_ratio <= 0 or self.relief_gap < 0:
@@ -99,7 +103,7 @@ class DetectionSettings:
         if unknown:
             raise ValueError(f"cut names unknown classes {sorted(unknown)}")
         for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes", "top_classes",
-                     "opening_classes", "face_classes", "side_classes", "relief_classes"):
+                     "footprint_classes", "opening_classes", "face_classes", "side_classes", "relief_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

@@ -18,6 +18,7 @@ from engine.detection import moments as mom
 from engine.detection.candidates import class_windows, side_reach, window_candidates
 from engine.detection.canonical import CanonicalFrame, estimate_frame
 from engine.detection.faces import fit_faces
+from engine.detection.footprint import fit_footprints
 from engine.detection.model import Model
 from engine.detection.openings import fit_openings, one_per_opening
 from engine.detection.planar import fit_planar
@@ -122,6 +123,9 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     if settings.refine and index is not None and settings.top_classes:  # bookcases as tall as their points
         fit_tops(lo_m, hi_m, cls_all, index.points_in_metric, settings.top_classes, settings.top_reach,
                  np.asarray(vol.frame.extent, float))
+    if settings.refine and index is not None and settings.footprint_classes:  # chairs as wide as their points
+        fit_footprints(lo_m, hi_m, cls_all, index.points_in_metric, settings.footprint_classes,
+                       settings.footprint_grow, np.asarray(vol.frame.extent, float))
     if settings.hanging_classes:  # a beam hangs from the ceiling: not one whose top is in the lower half
         keep = ~fallen(cls_all, hi_m, float(vol.frame.extent[2]), settings.hanging_classes)
         lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(keep, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat,

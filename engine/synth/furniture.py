@@ -22,6 +22,7 @@ import shapely
 
 from engine.synth import colours as C
 from engine.synth.building import Opening, Space, Wall
+from engine.synth.chairs import chair_stream, family_chair
 from engine.synth.hard import furniture as hard_furniture
 from engine.synth.pieces import bare_board, board, bookcase, chair, clutter, sofa, table
 from engine.synth.placer import Placer
@@ -44,6 +45,8 @@ def furnish(rng: np.random.Generator, space: Space, walls: list[Wall], openings:
     {"office": _office, "conferenceRoom": _conference, "hallway": _hallway, "lobby": _lobby,
      "storage": _storage, "WC": _wc, "openspace": _openspace, "stairs": _stairs}[space.type](p)
     _wall_clutter(p)
+    if "furniture" in style:
+        _name_chairs(space, style["furniture"])
     if hard is not None:
         hard_furniture.after(p, hard)
 
@@ -67,7 +70,7 @@ def _desk_with_chair(p: Placer, *, free_xy=None, yaw=None, clutter_on=True) -> b
     centre = np.mean([b.center[:2] for b in el.prims[:1]], axis=0)
     if rng.random() < 0.9:
         cxy = centre + front * (d / 2 + rng.uniform(0.3, 0.5)) + rng.uniform(-0.3, 0.3) * np.array([math.cos(th), math.sin(th)])
-        p.put("chair", chair(rng, C.pick(rng, C.CHAIRS)), cxy, th + math.pi + rng.uniform(-0.4, 0.4))
+        p.put("chair", _chair(p, C.pick(rng, C.CHAIRS)), cxy, th + math.pi + rng.uniform(-0.4, 0.4))
     if clutter_on:
         top = el.prims[0].center[2] + 0.015 - p.space.z0
         back = np.array([-math.sin(th), math.cos(th)])
@@ -84,6 +87,25 @@ def _desk_with_chair(p: Placer, *, free_xy=None, yaw=None, clutter_on=True) -> b
             parts, _ = clutter(rng, "bin")
             p.put("clutter", parts, xy, th, info={"kind": "bin"})
     return True
+
+
+def _chair(p: Placer, rgb: tuple) -> list:
+    """A chair's parts: the classic chair, or in a ``furniture`` building one of the family's shapes
+    (:mod:`engine.synth.chairs`) from the room's own furniture stream (the classic chair is drawn either way, so
+    that the room's other draws stay the classic building's)."""
+    parts = chair(p.rng, rgb)
+    if "furniture" not in p.style:
+        return parts
+    k = sum(e.cls == "chair" for e in p.space.elements)  # this room's chairs placed so far
+    return family_chair(chair_stream(p.style["furniture"], p.space.id, k), rgb)[0]
+
+
+def _name_chairs(space: Space, furniture: int) -> None:
+    """Record in each chair's ``info`` the family shape it was drawn with (the ``k``-th placed, the ``k``-th
+    stream)."""
+    chairs = [e for e in space.elements if e.cls == "chair"]
+    for k, e in enumerate(chairs):
+        e.info["shape"] = family_chair(chair_stream(furniture, space.id, k), (0, 0, 0))[1]
 
 
 def _bookcases(p: Placer, n: int, low_share: float = 0.3) -> None:
@@ -219,11 +241,11 @@ def _conference(p: Placer) -> None:
                 if rng.random() < 0.85:
                     xy = centre + ax * off + side * sgn * (W / 2 + rng.uniform(0.3, 0.45))
                     face = yaw + (0 if sgn > 0 else math.pi)  # back away from the table
-                    p.put("chair", chair(rng, rgb), xy, face + rng.uniform(-0.3, 0.3))
+                    p.put("chair", _chair(p, rgb), xy, face + rng.uniform(-0.3, 0.3))
         for sgn in (-1, 1):
             if rng.random() < 0.5:
                 xy = centre + ax * sgn * (L / 2 + 0.4)
-                p.put("chair", chair(rng, rgb), xy, yaw + (-math.pi / 2 if sgn > 0 else math.pi / 2))
+                p.put("chair", _chair(p, rgb), xy, yaw + (-math.pi / 2 if sgn > 0 else math.pi / 2))
         for _ in range(int(rng.integers(0, 4))):
             kind = str(rng.choice(["laptop", "papers"]))
             parts, _ = clutter(rng, kind, 0.74)
@@ -257,7 +279,7 @@ def _hallway(p: Placer) -> None:
         elif r < 0.92 and width >= 2.4:
             p.against_wall("sofa", lambda: sofa(rng, 1.6, C.pick(rng, C.SOFAS)), 1.6, 0.95, 0.9)
         elif width >= 2.2:
-            p.against_wall("chair", lambda: chair(rng, C.pick(rng, C.CHAIRS)), 0.56, 0.56, 1.0, gap=0.05)
+            p.against_wall("chair", lambda: _chair(p, C.pick(rng, C.CHAIRS)), 0.56, 0.56, 1.0, gap=0.05)
 
 
 def _lobby(p: Placer) -> None:
@@ -274,7 +296,7 @@ def _lobby(p: Placer) -> None:
     if rng.random() < 0.5:
         _desk_with_chair(p)
     for _ in range(int(rng.integers(2, 5))):
-        p.free_spot(10, lambda xy: p.put("chair", chair(rng, C.pick(rng, C.CHAIRS)), xy, rng.uniform(-math.pi, math.pi)))
+        p.free_spot(10, lambda xy: p.put("chair", _chair(p, C.pick(rng, C.CHAIRS)), xy, rng.uniform(-math.pi, math.pi)))
     _floor_clutter(p, int(rng.integers(2, 5)), kinds=("plant", "plant", "bin"))
     if rng.random() < 0.5:
         _board(p)

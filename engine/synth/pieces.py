@@ -13,7 +13,7 @@ import numpy as np
 
 from engine.synth import colours as C
 
-Part = tuple[float, float, float, float, float, float, tuple]  # cx, cy, cz, sx, sy, sz, rgb
+Part = tuple  # cx, cy, cz, sx, sy, sz, rgb[, turn about z in radians]
 
 
 # -- pieces (local frames) -----------------------------------------------------------------

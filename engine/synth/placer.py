@@ -80,10 +80,10 @@ class Placer:
         z = self.space.z0 if z is None else z
         c, s = math.cos(yaw), math.sin(yaw)
         out = []
-        for cx, cy, cz, sx, sy, sz, rgb in parts:
+        for cx, cy, cz, sx, sy, sz, rgb, *turn in parts:  # an eighth value turns the part about z
             wx = xy[0] + c * cx - s * cy
             wy = xy[1] + s * cx + c * cy
-            out.append(Box(np.array([wx, wy, z + cz]), np.array([sx, sy, sz], float), yaw, tuple(rgb)))
+            out.append(Box(np.array([wx, wy, z + cz]), np.array([sx, sy, sz], float), yaw + sum(turn), tuple(rgb)))
         return out
 
     def put(self, cls: str, parts: list[Part], xy, yaw: float, z: float = None, *, margin: float = 0.02,

@@ -41,6 +41,7 @@ from engine.synth.streams import (
     S_BUILDING,
     S_DOORS,
     S_FLOOR,
+    S_FURNITURE,
     S_SPACE,
     S_SUBSAMPLE,
     S_VARIETY,
@@ -123,7 +124,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
         density factor x0.25-x4), from streams of its own: the plan is the classic building's, and so is the
         furniture of every room without a new style; ``"subsampled"``: each room's scan voxel-subsampled on a
         1-5 cm grid; ``"windows"``: each exterior wall's window type (punched, ribbon, full-height, tall; with or
-        without mullions and sill); ``"doors"``: each door's type (classic, flush, glazed, sliding); or a
+        without mullions and sill); ``"doors"``: each door's type (classic, flush, glazed, sliding);
+        ``"furniture"``: each chair's shape (five-star, cantilever, armchair, stool, wide); or a
         comma-separated combination (:data:`engine.synth.streams.FAMILIES`).
     """
     try:
@@ -144,7 +146,8 @@ def plan_building(seed: int = 0, *, area_m2: float | None = None, rooms: int | N
 
     pl = _start_plan(int(seed), h, floors, area_m2, rooms, area_given)
     for family, key, stream in (("varied", "variety", S_VARIETY), ("subsampled", "subsample", S_SUBSAMPLE),
-                                ("windows", "windows", S_WINDOWS), ("doors", "doors", S_DOORS)):
+                                ("windows", "windows", S_WINDOWS), ("doors", "doors", S_DOORS),
+                                ("furniture", "furniture", S_FURNITURE)):
         if family in families:
             pl.style[key] = int(rng_for(int(seed), stream).integers(2 ** 31))
     z = 0.0

@@ -12,16 +12,16 @@ import numpy as np
 S_BUILDING, S_FLOOR, S_SPACE, S_SCAN = 0, 1, 2, 3
 #: The style variety's own streams (``styles="varied"``): a classic building's draws stay as they are.
 S_VARIETY = 4
-#: The streams of the ``subsampled``, ``windows`` and ``doors`` style families.
-S_SUBSAMPLE, S_WINDOWS, S_DOORS = 5, 6, 7
+#: The streams of the ``subsampled``, ``windows``, ``doors`` and ``furniture`` style families.
+S_SUBSAMPLE, S_WINDOWS, S_DOORS, S_FURNITURE = 5, 6, 7, 8
 #: The style families a building may draw from, beyond ``classic`` (the shipped model's training buildings):
 #: ``varied`` (boards bare or with a tray, and each room's scan character: :mod:`engine.synth.furniture`,
 #: :func:`engine.synth.colours.vary_scan`), ``subsampled`` (each room's scan voxel-subsampled on a grid of its
 #: own: :func:`engine.synth.colours.subsample_scan`), ``windows`` (each exterior wall's window type:
-#: :func:`engine.synth.openings.window_type`) and ``doors`` (each door's type:
-#: :func:`engine.synth.frames.door_type`).  Each family has its own stream, so that families combine
-#: (``"varied,windows"``) and a building's other draws stay the classic building's.
-FAMILIES = ("varied", "subsampled", "windows", "doors")
+#: :func:`engine.synth.openings.window_type`), ``doors`` (each door's type: :func:`engine.synth.frames.door_type`)
+#: and ``furniture`` (each chair's shape: :mod:`engine.synth.chairs`).  Each family has its own stream, so that
+#: families combine (``"varied,windows"``) and a building's other draws stay the classic building's.
+FAMILIES = ("varied", "subsampled", "windows", "doors", "furniture")
 
 
 def style_families(styles: str) -> tuple[str, ...]:

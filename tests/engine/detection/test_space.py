@@ -198,3 +198,29 @@ def test_a_beam_whose_top_is_in_the_lower_half_of_its_space_is_dropped():
     got = fallen(np.array([beam, beam, table, beam]), hi, 3.0, hanging)
     assert got.tolist() == [True, False, False, True]
     assert not fallen(np.array([beam]), hi[:1], 3.0, ()).any()
+
+
+def test_footprint_classes_move_only_their_detections_horizontal_sides(buildings):
+    """``footprint-classes`` (engine/detection/footprint.py) runs after the scores: with the shipped model, it moves
+    the horizontal sides of chairs to their points and changes no score, no height and no other class's box."""
+    from engine.detection.model import load_model
+    from engine.detection.space import detect_space
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    shipped = load_model()
+    moved = 0
+    for ref in index_spaces(store, "gt_space"):
+        pts = load_space(store, ref, "gt_space")
+        plain = detect_space(pts, shipped, DetectionSettings.from_config(footprint_classes=""))
+        fitted = detect_space(pts, shipped, DetectionSettings.from_config(footprint_classes="chair"))
+        assert [(p.class_code, p.score) for p in plain] == [(p.class_code, p.score) for p in fitted]
+        for a, b in zip(plain, fitted):
+            assert b.world_size[2] == pytest.approx(a.world_size[2])
+            if a.class_code != CLASS_CODES["chair"]:
+                np.testing.assert_allclose(b.world_size, a.world_size)
+                np.testing.assert_allclose(b.center, a.center)
+            else:
+                moved += not np.allclose(b.world_size, a.world_size)
+    assert moved > 0
