@@ -27,10 +27,15 @@ def chair_stream(furniture: int, space: int, k: int) -> np.random.Generator:
     return np.random.default_rng([int(furniture), int(space), int(k)])
 
 
+def chair_shape(r: np.random.Generator) -> str:
+    """The shape of a family chair: the first draw of its stream."""
+    return SHAPES[int(r.choice(len(SHAPES), p=WEIGHTS))]
+
+
 def family_chair(r: np.random.Generator, rgb: tuple) -> tuple[list[Part], str]:
     """One chair of the family (local frame: origin on the floor under its middle, back towards +y) and its
     shape's name."""
-    shape = SHAPES[int(r.choice(len(SHAPES), p=WEIGHTS))]
+    shape = chair_shape(r)
     return {"five-star": _five_star, "cantilever": _cantilever, "armchair": _armchair, "stool": _stool,
             "wide": _wide}[shape](r, rgb), shape
 

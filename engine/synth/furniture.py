@@ -22,7 +22,7 @@ import shapely
 
 from engine.synth import colours as C
 from engine.synth.building import Opening, Space, Wall
-from engine.synth.chairs import chair_stream, family_chair
+from engine.synth.chairs import chair_shape, chair_stream, family_chair
 from engine.synth.hard import furniture as hard_furniture
 from engine.synth.pieces import bare_board, board, bookcase, chair, clutter, sofa, table
 from engine.synth.placer import Placer
@@ -102,10 +102,10 @@ def _chair(p: Placer, rgb: tuple) -> list:
 
 def _name_chairs(space: Space, furniture: int) -> None:
     """Record in each chair's ``info`` the family shape it was drawn with (the ``k``-th placed, the ``k``-th
-    stream)."""
+    stream's first draw)."""
     chairs = [e for e in space.elements if e.cls == "chair"]
     for k, e in enumerate(chairs):
-        e.info["shape"] = family_chair(chair_stream(furniture, space.id, k), (0, 0, 0))[1]
+        e.info["shape"] = chair_shape(chair_stream(furniture, space.id, k))
 
 
 def _bookcases(p: Placer, n: int, low_share: float = 0.3) -> None:
