@@ -83,5 +83,5 @@ def test_cli_styles_combine_families_in_one_order_and_refuse_unknown_ones(tmp_pa
         main(["synth", str(tmp_path / "x.zarr"), "--styles", "varied,baroque"])
     assert exit_.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert "combination of varied, subsampled, windows, doors, not 'varied,baroque'" in err[-1]
+    assert "combination of varied, subsampled, windows, doors, furniture, not 'varied,baroque'" in err[-1]
     assert not (tmp_path / "x.zarr").exists()
