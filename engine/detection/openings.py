@@ -12,7 +12,9 @@ the box grown by :data:`DEPTH` metres, searched ``opening-grow`` metres beyond t
 :data:`VERTICAL` metres above and below it.  In a grid of :data:`CELL` cells of the wall's plane, a cell with a
 point within :data:`FACE` of the face is wall; one without, but with a point deeper than that (away from the
 room), is open.  The connected open region that covers most of the detection's box is the opening, and the box
-takes its width and height, side by side.  A region covering under :data:`MIN_SHARE` of the box leaves it as it is.
+takes its width and height, side by side.  Where that region covers under :data:`MIN_SHARE` of the box, a narrower
+window between piers is its opening (:func:`narrow_opening`: mostly inside the box, at least :data:`NARROW_SIDE`
+wide and tall, :data:`PIER` cells of wall on each side); without one the box is left as it is.
 
 A region that reaches the end of the search along the wall may be a ribbon window longer than the search: the
 search then runs on along the wall, over the whole space, column of cells by column (:func:`run_along`), as long as
@@ -46,6 +48,11 @@ FACE = 0.03
 MIN_SHARE = 0.3
 #: Points a fit needs.
 MIN_POINTS = 50
+#: The least width and height (metres) of an opening narrower than its box.
+NARROW_SIDE = 0.3
+#: Columns (rows) of cells, 0.15 m, beside (above, below) a narrow opening that must each be wall over half their
+#: length: its piers, lintel and sill.
+PIER = 3
 
 
 def fit_openings(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
@@ -116,8 +123,10 @@ def opening_box(depth: np.ndarray, behind: int, u: np.ndarray, z: np.ndarray, u_
     hits[0] = 0
     best = int(np.argmax(hits))
     if best == 0 or hits[best] < MIN_SHARE * inside.size:
-        return None
-    su, sz = ndimage.find_objects((labels == best).astype(np.int32))[0]
+        best = narrow_opening(labels, count, hits, wall)
+        if best == 0:
+            return None
+    su, sz = ndimage.find_objects(labels)[best - 1]
     u0, u1 = u_range[0] + su.start * CELL, u_range[0] + su.stop * CELL
     z0, z1 = z_range[0] + sz.start * CELL, z_range[0] + sz.stop * CELL
     # a side at the edge of the search (not the space's) runs on: keep the box's there
@@ -131,6 +140,26 @@ def opening_box(depth: np.ndarray, behind: int, u: np.ndarray, z: np.ndarray, u_
     if sz.stop == nz and z_range[1] < space_z[1] - 1e-9:
         z1 = box_z[1]
     return (u0, u1), (z0, z1), face, runs
+
+
+def narrow_opening(labels: np.ndarray, count: int, hits: np.ndarray, wall: np.ndarray) -> int:
+    """The label of the opening narrower than a box that covers too little of it (:data:`MIN_SHARE`), or 0:
+    the region with most cells in the box among those with at least half of their cells in it, at least
+    :data:`NARROW_SIDE` wide and tall, and bounded by wall: the :data:`PIER` columns on each side of it (its
+    piers) and the :data:`PIER` rows above and below it (lintel and sill), each wall over at least half of its
+    length (a piece of a wider opening cut off by a seam of stray points has the rest of the opening beyond the
+    seam, not a wall)."""
+    size = np.bincount(labels.ravel(), minlength=count + 1)
+    side = int(round(NARROW_SIDE / CELL))
+    best, most = 0, 0
+    for r, (su, sz) in enumerate(ndimage.find_objects(labels), start=1):
+        if hits[r] < 0.5 * size[r] or hits[r] <= most or su.stop - su.start < side or sz.stop - sz.start < side:
+            continue
+        beside = (wall[max(0, su.start - PIER):su.start, sz], wall[su.stop:su.stop + PIER, sz],
+                  wall[su, max(0, sz.start - PIER):sz.start].T, wall[su, sz.stop:sz.stop + PIER].T)
+        if all(w.shape[0] == PIER and (w.mean(axis=1) >= 0.5).all() for w in beside):
+            best, most = r, hits[r]
+    return best
 
 
 def face_cells(depth: np.ndarray, behind: int, face: float, u: np.ndarray, z: np.ndarray, u_origin: float,

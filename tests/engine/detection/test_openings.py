@@ -106,3 +106,28 @@ def test_fit_openings_says_which_openings_it_followed():
     lo, hi = np.array([[3.0, 0.05, 0.8], [0.6, 0.05, 0.9]]), np.array([[4.5, 0.37, 2.2], [7.4, 0.37, 2.1]])
     followed = fit_openings(lo, hi, np.array([WINDOW, WINDOW]), _query(pts), ("window",), 1.0, EXTENT)
     assert followed.tolist() == [True, False]  # the second box's search holds the whole opening
+
+
+def _fitted(points, lo, hi, grow):
+    """The window box ``lo``-``hi`` fitted to its opening in ``points``: its ``u0, u1, z0, z1``."""
+    lo, hi = np.array([lo], dtype=float), np.array([hi], dtype=float)
+    fit_openings(lo, hi, np.array([WINDOW]), _query(points), ("window",), grow, EXTENT)
+    return [lo[0, 0], hi[0, 0], lo[0, 2], hi[0, 2]]
+
+
+def test_a_narrow_window_in_a_wide_box_takes_its_opening_but_a_piece_of_a_wider_one_does_not():
+    """A 0.6 m window between piers covers under MIN_SHARE of a training window's 2.2 m box: it is still the box's
+    opening.  A piece of a wider opening, cut off by a seam of stray points on the face's plane, is not (the piece
+    has the rest of the opening beside it, not a pier), and leaves the box as it is."""
+    rng = np.random.default_rng(5)
+    box = ([2.2, 0.05, 0.8], [4.4, 0.37, 2.2])
+    narrow = _wall_with_window(rng, 3.0, 3.6, 0.9, 2.1)
+    assert np.allclose(_fitted(narrow, *box, 1.0), [3.0, 3.6, 0.9, 2.1], atol=0.06)
+    # a 4 m opening with stray face points in a 3 cm seam at u = 3.6: the piece 3.0-3.6 has no pier on its right
+    wide = _wall_with_window(rng, 3.0, 7.0, 0.9, 2.1)
+    cut = np.concatenate([wide, rng.uniform([3.585, 0.347, 0.9], [3.615, 0.353, 2.1], (400, 3))])
+    assert np.allclose(_fitted(cut, [1.4, 0.05, 0.8], [3.65, 0.37, 2.2], 0.5)[:2], [1.4, 3.65])
+    # a narrow window cut across by a seam at z = 1.5 (a transom's stray points): neither half has a lintel or a
+    # sill of wall on the seam's side, so neither is taken for the window
+    cut = np.concatenate([narrow, rng.uniform([3.0, 0.347, 1.485], [3.6, 0.353, 1.515], (400, 3))])
+    assert np.allclose(_fitted(cut, *box, 1.0), [2.2, 4.4, 0.8, 2.2])
