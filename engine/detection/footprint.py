@@ -5,7 +5,8 @@ A chair's box comes from a 10 cm grid and the learned box fit, both made on the 
 grown by ``footprint-grow`` metres on each horizontal side and down to the space's floor, the floor is the densest
 :data:`BIN` of heights in the lowest :data:`FLOOR_BAND`; the points more than :data:`FLOOR_GAP` above it are the
 element's and its neighbours'.  The element is their connected part (:data:`VOXEL` voxels) that holds most of
-the box's: a table leg or a bin beside the chair that does not touch it is left out.  Along each horizontal axis a
+the box's, with the parts wholly above or below it centred over it (a star base under a seat whose gas column is
+hidden): a table leg or a bin beside the chair that does not touch it is left out.  Along each horizontal axis a
 side moves to the element's extreme but :data:`OUTLIERS` (a quantile would cut a star base's thin arms), but only
 where it stops inside the grown box (no more than :data:`OUTLIERS` of its points within :data:`EDGE` of its
 side): where it runs on to it, a neighbour touches the element (a table the chair is pushed under, a wall) and the
@@ -54,8 +55,8 @@ def floor_level(z: np.ndarray, bottom: float) -> float | None:
 
 def element_points(p: np.ndarray, origin: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The points ``p`` of the connected part (:data:`VOXEL` voxels from ``origin``, touching across edges and
-    corners) that holds most of those in the box ``[lo, hi]``: the element without the neighbours that do not
-    touch it."""
+    corners) that holds most of those in the box ``[lo, hi]``, with the parts :func:`stacked` on it: the element
+    without the neighbours that do not touch it."""
     if len(p) == 0:
         return p
     ijk = np.floor((p - origin) / VOXEL).astype(np.int64)
@@ -68,7 +69,24 @@ def element_points(p: np.ndarray, origin: np.ndarray, lo: np.ndarray, hi: np.nda
     if count <= 1 or not inside.any():
         return p
     best = int(np.argmax(np.bincount(label[inside], minlength=count + 1)[1:])) + 1
-    return p[label == best]
+    return p[np.isin(label, stacked(p, label, best, count))]
+
+
+def stacked(p: np.ndarray, label: np.ndarray, best: int, count: int) -> np.ndarray:
+    """The labels of part ``best`` and of the parts wholly above or below it whose centre lies over its horizontal
+    extent (grown by a :data:`VOXEL`): a chair's star base under its seat, joined by a gas column too thin or too
+    hidden to have points in every voxel."""
+    idx = np.arange(1, count + 1)
+    n = ndimage.sum_labels(np.ones(len(p)), label, idx)
+    lo = np.column_stack([ndimage.minimum(p[:, a], label, idx) for a in range(3)])
+    hi = np.column_stack([ndimage.maximum(p[:, a], label, idx) for a in range(3)])
+    mid = np.column_stack([ndimage.sum_labels(p[:, a], label, idx) for a in range(2)]) / np.maximum(n, 1)[:, None]
+    b = best - 1
+    over = np.all((mid >= lo[b, :2] - VOXEL) & (mid <= hi[b, :2] + VOXEL), axis=1)
+    apart = (hi[:, 2] < lo[b, 2]) | (lo[:, 2] > hi[b, 2])
+    keep = (n > 0) & over & apart
+    keep[b] = True
+    return idx[keep]
 
 
 def fit_footprints(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,

@@ -16,14 +16,15 @@ def _slab(rng, lo, hi, n):
     return rng.uniform(lo, hi, (n, 3))
 
 
-def _office_chair(rng, at=(2.0, 2.0), base=0.7, noise=0.005) -> np.ndarray:
-    """An office chair at ``at``: a star base ``base`` wide (two crossed bars 0-7 cm high), a post, a 0.46 m seat
-    at 0.45 m and a back; the floor around it."""
+def _office_chair(rng, at=(2.0, 2.0), base=0.7, noise=0.005, post=200) -> np.ndarray:
+    """An office chair at ``at``: a star base ``base`` wide (two crossed bars 0-7 cm high), a post (``post``
+    points: 0 where the seat hides it from every scanner), a 0.46 m seat at 0.45 m and a back; the floor around
+    it."""
     x, y = at
     b, s = base / 2, 0.23
     parts = [_slab(rng, [x - b, y - 0.025, 0.0], [x + b, y + 0.025, 0.07], 400),
              _slab(rng, [x - 0.025, y - b, 0.0], [x + 0.025, y + b, 0.07], 400),
-             _slab(rng, [x - 0.025, y - 0.025, 0.07], [x + 0.025, y + 0.025, 0.42], 200),
+             _slab(rng, [x - 0.025, y - 0.025, 0.07], [x + 0.025, y + 0.025, 0.42], post),
              _slab(rng, [x - s, y - s, 0.42], [x + s, y + s, 0.49], 1500),
              _slab(rng, [x - 0.22, y + 0.17, 0.49], [x + 0.22, y + 0.23, 0.95], 1000)]
     floor = _slab(rng, [0.0, 0.0, 0.0], [6.0, 5.0, 0.0], 60000)
@@ -51,6 +52,18 @@ def test_a_box_too_wide_takes_the_chairs_base_not_only_its_seat():
     assert np.all((width > 0.62) & (width < 0.72)), width  # the base's 0.7 m (less a few strays), not the seat's 0.46 m
     assert np.all(np.abs(0.5 * (lo[0, :2] + hi[0, :2]) - 2.0) < 0.02)
     assert lo[0, 2] == 0.0 and hi[0, 2] == 1.0  # the height stays
+
+
+def test_a_base_apart_from_its_seat_is_the_chairs_and_a_bin_beside_it_is_not():
+    """Without a point on the post the base and the seat are two parts: the base, wholly below the seat and centred
+    under it, is still the chair's; a bin beside the chair, not touching it, is left out."""
+    rng = np.random.default_rng(5)
+    pts = np.concatenate([_office_chair(rng, base=0.7, post=0), _slab(rng, [2.45, 1.8, 0.0], [2.55, 2.2, 0.3], 800)])
+    lo, hi = np.array([[1.6, 1.6, 0.0]]), np.array([[2.4, 2.4, 1.0]])
+    fit_footprints(lo, hi, np.array([CHAIR]), _query(pts), ("chair",), 0.1, EXTENT)
+    width = hi[0, :2] - lo[0, :2]
+    assert np.all((width > 0.62) & (width < 0.72)), width  # the base's, not the seat's 0.46 m, and not the bin's
+    assert np.all(np.abs(0.5 * (lo[0, :2] + hi[0, :2]) - 2.0) < 0.02)
 
 
 def test_a_side_where_a_neighbour_runs_on_stays_and_other_classes_are_left_alone():
