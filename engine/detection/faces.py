@@ -13,7 +13,9 @@ that a cell holds :data:`CELL_POINTS` of the box's face points on average), sear
 its box's points), and not beyond its box's front (a chair or a table in front is not the board).  The connected
 cells that cover most of the box are the element; the box takes their width and height, side by side, unless they
 reach the edge of the search there (the face runs on: a wall's jog, a cabinet).  Cells covering under
-:data:`MIN_SHARE` of the box leave it as it is.  Settings: ``buildingparser.detection.face-*``.
+:data:`MIN_SHARE` of the box leave it as it is, and call it *bare*: a wall with nothing standing out of it, which
+:mod:`engine.detection.space` does not keep as a board (a board on a stand, with no wall beside it, is not
+bare).  Settings: ``buildingparser.detection.face-*``.
 """
 from __future__ import annotations
 
@@ -67,12 +69,14 @@ def face_extent(cells: np.ndarray, box: tuple[slice, slice]) -> tuple[int, int, 
 
 def fit_faces(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
               points_in_metric: Callable[[np.ndarray, np.ndarray], np.ndarray], classes: tuple[str, ...],
-              grow: float, extent: np.ndarray) -> int:
+              grow: float, extent: np.ndarray) -> tuple[int, np.ndarray]:
     """Set in place the width and height (canonical metres) of the detections of ``classes`` to their face's (see
-    the module doc); ``extent``: the space's size in canonical metres.  Returns how many were fitted."""
+    the module doc); ``extent``: the space's size in canonical metres.  Returns how many were fitted, and which
+    are bare: a wall's plane beside them but no face standing out of it over their box."""
     codes = [ELEMENT_CLASSES.index(c) for c in classes]
     ext = np.asarray(extent, dtype=np.float64)
     done = 0
+    bare = np.zeros(len(lo_m), dtype=bool)
     for i in np.flatnonzero(np.isin(np.asarray(class_code), codes)):
         a = 0 if hi_m[i, 0] - lo_m[i, 0] <= hi_m[i, 1] - lo_m[i, 1] else 1  # the wall's normal
         b = 1 - a
@@ -93,6 +97,7 @@ def fit_faces(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
         reach = side * ((hi_m[i, a] if side > 0 else lo_m[i, a]) - plane)  # the box's front, from the plane
         inbox = at & (p[:, b] >= lo_m[i, b]) & (p[:, b] <= hi_m[i, b]) & (front > MIN_PROUD) & (front <= reach)
         if reach <= MIN_PROUD or np.count_nonzero(inbox) < MIN_CELL:
+            bare[i] = True
             continue
         proud = max(0.5 * float(np.median(front[inbox])), MIN_PROUD)
         area = max((hi_m[i, b] - lo_m[i, b]) * (hi_m[i, 2] - lo_m[i, 2]), 1e-6)
@@ -111,6 +116,7 @@ def fit_faces(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
         bl, bh = np.clip(bl, 0, np.array(shape) - 1), np.clip(bh, 1, np.array(shape))
         found = face_extent(cells, (slice(bl[0], bh[0]), slice(bl[1], bh[1])))
         if found is None:
+            bare[i] = True
             continue
         a0, a1, u0, u1 = found
         if a0 > 0:
@@ -122,7 +128,7 @@ def fit_faces(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
         if u1 < shape[1]:
             hi_m[i, 2] = s_lo[1] + u1 * cell
         done += 1
-    return done
+    return done, bare
 
 
 __all__ = ["face_cells", "face_extent", "fit_faces"]

@@ -112,8 +112,10 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         fit_planar(lo_m, hi_m, cls_all, index.points_in_metric, settings.planar_classes, settings.planar_depth,
                    settings.planar_beside, settings.planar_quantile, np.asarray(vol.frame.extent, float))
     if settings.refine and index is not None and settings.face_classes:  # boards as wide and tall as their face
-        fit_faces(lo_m, hi_m, cls_all, index.points_in_metric, settings.face_classes, settings.face_grow,
-                  np.asarray(vol.frame.extent, float))
+        _, bare = fit_faces(lo_m, hi_m, cls_all, index.points_in_metric, settings.face_classes, settings.face_grow,
+                            np.asarray(vol.frame.extent, float))
+        lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(~bare, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat,
+                                                                    sure)  # nothing stands out of the wall there
     if settings.refine and index is not None and settings.opening_classes:  # windows as their openings
         followed = fit_openings(lo_m, hi_m, cls_all, index.points_in_metric, settings.opening_classes,
                                 settings.opening_grow, np.asarray(vol.frame.extent, float))
