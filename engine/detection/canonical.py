@@ -109,8 +109,8 @@ class CanonicalFrame:
 def dominant_yaw(xyz: np.ndarray, voxel: float = 0.25, max_cells: int = 400_000) -> float:
     """Manhattan orientation in ``(-pi/4, pi/4]`` of a space's points from its vertical planar patches."""
     xyz = np.asarray(xyz, dtype=np.float64)
-    lo = xyz.min(axis=0)
-    grid = mom.VoxelGrid.covering(xyz.max(axis=0) - lo, voxel, max_cells)
+    lo, hi = mom.column_bounds(xyz)
+    grid = mom.VoxelGrid.covering(hi - lo, voxel, max_cells)
     m = mom.voxel_moments(xyz - lo, None, grid).reshape(-1, mom.N_CHANNELS)
     m = m[m[:, 0] >= 8]
     if len(m):
@@ -185,8 +185,7 @@ def refine_yaw(xyz: np.ndarray, yaw: float, *, span: float = np.radians(1.5), bi
 def _robust_box(m: np.ndarray, quantile: float) -> tuple[np.ndarray, np.ndarray]:
     if len(m) == 0:
         return np.zeros(3), np.ones(3)
-    lo = np.quantile(m, quantile, axis=0)
-    hi = np.quantile(m, 1.0 - quantile, axis=0)
+    lo, hi = np.quantile(m, [quantile, 1.0 - quantile], axis=0)  # one partition for both ends
     return lo, np.maximum(hi, lo + 0.05)
 
 

@@ -56,11 +56,14 @@ def window_positions(grid: mom.VoxelGrid, shape: np.ndarray, stride: float,
 
 
 def _intervals(pos: np.ndarray, w: int, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct sub-box intervals ``(u, 2)`` of all positions and, per position and slot, their index."""
+    """Distinct sub-box intervals ``(u, 2)`` of all positions (sorted by start, then stop) and, per position and
+    slot, their index.  An interval is one integer key ``start * span + stop`` (``np.unique`` of rows sorts
+    them the same way, several times slower)."""
     b = sub_bounds(np.array(w), k)
-    iv = np.stack([pos[:, None] + b[None, :-1], pos[:, None] + b[None, 1:]], axis=-1).reshape(-1, 2)
-    uniq, inv = np.unique(iv, axis=0, return_inverse=True)
-    return uniq, inv.reshape(len(pos), k)
+    lo, hi = (pos[:, None] + b[None, :-1]).ravel(), (pos[:, None] + b[None, 1:]).ravel()
+    span = int(hi.max()) + 1 if len(hi) else 1
+    keys, inv = np.unique(lo * span + hi, return_inverse=True)
+    return np.stack([keys // span, keys % span], axis=1), inv.reshape(len(pos), k)
 
 
 def _exclusive_cumsum(c: np.ndarray) -> np.ndarray:

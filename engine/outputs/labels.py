@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from engine import config
+from engine.detection.moments import column_bounds
 from engine.detection.proposals import Proposal
 from tiles import paths
 from tiles.classes import CLUTTER, ELEMENT_CLASSES, element_class_list
@@ -192,7 +193,7 @@ def label_arrays(xyz: np.ndarray, boxes: dict[str, np.ndarray], margin: float, *
         space = np.asarray(space)
         box_space = np.asarray(bx["space"])
     xyz = np.asarray(xyz, dtype=np.float64)
-    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    lo, hi = column_bounds(xyz)
     cell, shape, e_cell, e_box = _bucket_grid(bx, bounds, cos, sin, margin, lo, hi, cell)
     n_cells = int(np.prod(shape))
     if n_cells <= DENSE_CELLS:

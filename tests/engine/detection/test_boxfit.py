@@ -71,6 +71,14 @@ def test_axis_features_are_those_of_quantiles_and_a_histogram_of_the_values(seed
                                           _reference_axis_features(pts, lo, hi, axis, mirror))
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 100, 4097])
+def test_sorted_quantiles_are_numpys_bit_for_bit(n):
+    rng = np.random.default_rng(n)
+    q = np.concatenate([bf._Q, np.linspace(0.0, 1.0, 101), rng.uniform(0, 1, 50)])
+    for u in (np.sort(rng.normal(size=n)), np.sort(np.round(rng.uniform(-1, 2, n), 1))):
+        np.testing.assert_array_equal(bf.sorted_quantiles(u, q), np.quantile(u, q))
+
+
 def test_roles_and_face_offsets_round_trip():
     rng = np.random.default_rng(3)
     extent = np.array([6.0, 4.0, 4.0])

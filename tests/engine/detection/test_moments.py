@@ -133,3 +133,11 @@ def test_voxel_moments_with_a_given_index_and_without_colours():
     want = [sel.sum(), *p.sum(0), *(p[:, a] * p[:, b] for a, b in mom._PAIRS), *rgb[sel].sum(0)]
     want = [float(np.sum(w)) for w in want]
     assert np.allclose(m[tuple(idx[0])], want, rtol=1e-12, atol=1e-12)
+
+
+def test_column_bounds_are_numpys_min_and_max():
+    rng = np.random.default_rng(5)
+    for pts in (rng.normal(size=(1001, 3)), rng.normal(size=(1, 3)), np.asfortranarray(rng.normal(size=(50, 2)))):
+        lo, hi = mom.column_bounds(pts)
+        np.testing.assert_array_equal(lo, pts.min(axis=0))
+        np.testing.assert_array_equal(hi, pts.max(axis=0))
