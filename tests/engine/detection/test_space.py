@@ -224,3 +224,42 @@ def test_footprint_classes_move_only_their_detections_horizontal_sides(buildings
             else:
                 moved += not np.allclose(b.world_size, a.world_size)
     assert moved > 0
+
+
+def test_a_board_box_on_a_bare_wall_is_not_kept_by_detection():
+    """``face-classes``: of two board windows on one wall, the one over a board standing 2 cm out of it is kept and
+    the one over bare wall is dropped (engine.detection.faces.fit_faces's ``bare``); with ``face-classes`` empty
+    both stay."""
+    from engine.detection.canonical import CanonicalFrame
+    from engine.detection.model import load_model
+    from engine.detection.space import detect_in_volume, prepare_indexed
+    from engine.spaces.points import SpacePoints
+
+    rng = np.random.default_rng(11)
+    ext = np.array([5.0, 8.0, 3.0])
+    room = [rng.uniform([0, 0, 0], [5, 8, 0], (60000, 3)), rng.uniform([0, 0, 3], [5, 8, 3], (60000, 3))]
+    for axis, at in ((0, 0.0), (0, 5.0), (1, 0.0), (1, 8.0)):
+        w = rng.uniform(0, 1, (60000, 3)) * ext
+        w[:, axis] = at
+        room.append(w)
+    wall = room[2]  # x = 0: a board 2 cm proud over y 2.0-4.6, z 0.9-2.05; bare wall over y 5.3-7.7
+    wall[:, 0] += np.where((wall[:, 1] > 2.0) & (wall[:, 1] < 4.6) & (wall[:, 2] > 0.9) & (wall[:, 2] < 2.05), 0.02, 0)
+    xyz = np.concatenate(room) + rng.normal(0, 0.002, (len(room) * 60000, 3))
+    pts = SpacePoints(0, xyz, np.full((len(xyz), 3), 0.6))
+    model = load_model(None)
+    vol, index = prepare_indexed(pts, model, CanonicalFrame(0.0, [0, 0, -0.001], ext + [0, 0, 0.002]))
+    board = CLASS_CODES["board"]
+    atom = next(i for i, a in enumerate(model.dictionary.atoms_) if a.class_code == board)
+    vox = vol.grid.voxel
+    lo = np.round(np.array([[0.0, 2.2, 1.0], [0.0, 5.6, 1.0]]) / vox).astype(np.int64)
+    hi = np.round(np.array([[0.1, 4.4, 2.0], [0.1, 7.4, 2.0]]) / vox).astype(np.int64)
+    found = {atom: (lo, hi, np.array([5.0, 5.0]), np.array([atom, atom]), np.zeros(2, bool))}
+
+    def centres_y(settings):
+        det = detect_in_volume(vol, model, settings, index, [board], found)
+        return sorted(((det.lo_m + det.hi_m) / 2)[det.class_code == board, 1].round(1))
+
+    kept = centres_y(DetectionSettings.from_config())
+    assert len(kept) == 1 and 2.0 < kept[0] < 4.6
+    both = centres_y(DetectionSettings.from_config(face_classes=()))
+    assert len(both) == 2 and 5.3 < both[1] < 7.7
