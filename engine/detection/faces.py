@@ -6,7 +6,7 @@ its depth is fitted (:mod:`engine.detection.planar`), its points show its extent
 wall's plane (the densest plane of the wall beside the element, :func:`engine.detection.planar.wall_plane`) by the
 board's depth, the wall around it does not.
 
-In a grid of cells of the wall's plane (:data:`CELL`, larger up to :data:`MAX_CELL` where the scan is sparse, so
+In a grid of cells of the wall's plane (:func:`engine.detection.planar.cell_side`: larger where the scan is sparse, so
 that a cell holds :data:`CELL_POINTS` of the box's face points on average), searched ``face-grow`` metres beyond the box's sides and
 :data:`VERTICAL` metres above and below it, a cell is the element's when most of its points (at least
 :data:`MIN_CELL` of them) stand in front of the plane by more than half the element's typical depth (the median of
@@ -24,11 +24,9 @@ from collections.abc import Callable
 import numpy as np
 from scipy import ndimage
 
-from engine.detection.planar import BEHIND, wall_plane
+from engine.detection.planar import BEHIND, cell_side, wall_plane
 from tiles.classes import ELEMENT_CLASSES
 
-#: Cell of the wall's plane (metres): the least, and the most when the points are sparse.
-CELL, MAX_CELL = 0.05, 0.2
 #: Points a cell is to hold on average, which sets its size in a sparse scan.
 CELL_POINTS = 8
 #: Metres searched above and below the box.
@@ -101,7 +99,7 @@ def fit_faces(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
             continue
         proud = max(0.5 * float(np.median(front[inbox])), MIN_PROUD)
         area = max((hi_m[i, b] - lo_m[i, b]) * (hi_m[i, 2] - lo_m[i, 2]), 1e-6)
-        cell = float(np.clip(np.sqrt(CELL_POINTS * area / np.count_nonzero(inbox)), CELL, MAX_CELL))
+        cell = cell_side(np.count_nonzero(inbox), area, CELL_POINTS)
         s_lo = np.array([lo_m[i, b] - grow, lo_m[i, 2] - VERTICAL])
         s_lo = np.maximum(s_lo, 0.0)
         s_hi = np.minimum([hi_m[i, b] + grow, hi_m[i, 2] + VERTICAL], [ext[b], ext[2]])

@@ -41,6 +41,17 @@ BEHIND = 0.03
 #: A stretch along the normal (metres) without a point that ends the element: its face, edges and tray are
 #: continuous in depth; a chair, a table or a sill in front of it is across such a gap.
 GAP = 0.02
+#: Cells of a wall's plane (metres): the least, and the most where the points are sparse (:func:`cell_side`).
+CELL, MAX_CELL = 0.05, 0.2
+
+
+def cell_side(count: int, area: float, per_cell: float) -> float:
+    """The side (metres) of square cells of a wall's plane in which ``count`` points over ``area`` m² put
+    ``per_cell`` points a cell on average: at least :data:`CELL`, at most :data:`MAX_CELL` (a sparse scan's cells
+    are larger, so that they are not mostly empty); :data:`CELL` without points."""
+    if count <= 0 or area <= 0.0:
+        return CELL
+    return float(np.clip(np.sqrt(per_cell * area / count), CELL, MAX_CELL))
 
 
 def wall_plane(values: np.ndarray) -> float | None:

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
-from engine.detection.openings import fit_openings, one_per_opening
+from engine.detection.openings import cell_size, fit_openings, one_per_opening, open_cells
+from engine.detection.planar import CELL, MAX_CELL
 from engine.detection.settings import DetectionSettings
 from tiles.classes import ELEMENT_CLASSES
 
@@ -131,3 +133,41 @@ def test_a_narrow_window_in_a_wide_box_takes_its_opening_but_a_piece_of_a_wider_
     # sill of wall on the seam's side, so neither is taken for the window
     cut = np.concatenate([narrow, rng.uniform([3.0, 0.347, 1.485], [3.6, 0.353, 1.515], (400, 3))])
     assert np.allclose(_fitted(cut, *box, 1.0), [2.2, 4.4, 0.8, 2.2])
+
+
+def test_a_sparse_scan_finds_its_opening_on_cells_sized_to_its_face():
+    """At 300 points per m² of face a 5 cm cell holds 0.75 of them on average, and the glass, at half that, leaves
+    most of the opening's cells empty: on 5 cm cells the face is full of holes and the opening is specks, and the
+    box stays a training window's.  Cells sized to the face's density (four points a cell) find the opening; a
+    face hidden by a desk is still no opening."""
+    rng = np.random.default_rng(6)
+    pts = _wall_with_window(rng, 2.0, 3.7, 0.9, 2.2, n=7200)
+    box = ([1.6, 0.05, 0.7], [4.3, 0.37, 2.5])
+    assert np.allclose(_fitted(pts, *box, 1.5), [2.0, 3.7, 0.9, 2.2], atol=0.15)
+    hidden = (pts[:, 1] > 0.3) & (pts[:, 0] > 1.5) & (pts[:, 0] < 4.2) & (pts[:, 2] > 0.3) & (pts[:, 2] < 0.75)
+    desk = rng.uniform([1.5, 0.5, 0.74], [4.2, 1.1, 0.76], (800, 3))
+    assert np.allclose(_fitted(np.concatenate([pts[~hidden], desk]), *box, 1.5), [2.0, 3.7, 0.9, 2.2], atol=0.15)
+
+
+def test_the_cell_follows_the_face_density_beside_the_box():
+    rng = np.random.default_rng(7)
+    u, z = rng.uniform(0.0, 4.0, 4000), rng.uniform(0.0, 2.5, 4000)  # 400 points per m² over the search
+    on = np.ones(4000, dtype=bool)
+    on[(u > 1.0) & (u < 3.0) & (z > 0.5) & (z < 2.0)] = False  # the box holds an opening: no face there
+    assert cell_size(on, u, z, (0.0, 4.0), (0.0, 2.5), (1.0, 3.0), (0.5, 2.0)) == pytest.approx(0.1, rel=0.05)
+    assert cell_size(on[:40], u[:40], z[:40], (0.0, 4.0), (0.0, 2.5), (1.0, 3.0), (0.5, 2.0)) == MAX_CELL
+    dense = np.ones(200000, dtype=bool)
+    assert cell_size(dense, *rng.uniform(0.0, 2.5, (2, 200000)), (0.0, 2.5), (0.0, 2.5), (3.0, 3.0), (3.0, 3.0)) == CELL
+
+
+def test_open_cells_join_the_specks_of_a_sparse_opening_but_not_a_hidden_face():
+    wall = np.ones((20, 16), dtype=bool)
+    wall[4:16, 3:13] = False  # the opening and, below it, a face hidden by a desk (no point at all)
+    seen = np.zeros_like(wall)
+    seen[4:16:2, 7:13:2] = True  # glass: one cell in four holds a point deeper than the face
+    seen[5:16:2, 8:13:2] = True
+    assert ndimage.label(seen & ~wall)[1] > 1  # specks
+    found = open_cells(wall, seen)
+    labels, count = ndimage.label(found)
+    assert count == 1 and found[4:16, 7:13].sum() >= 0.9 * 72
+    assert not found[:, :6].any() and not found[wall].any()  # the hidden face stays closed; wall is never open
