@@ -101,7 +101,7 @@ SETTINGS: dict[str, Any] = {
         "planar-quantile": "float in [0, 0.5)", "feature-points": "int >= 0",
         "min-space-density": "float in [0, 1)", "top-classes": "classes", "top-reach": "float >= 0",
         "footprint-classes": "classes", "footprint-grow": "float >= 0",
-        "opening-classes": "classes", "opening-grow": "float >= 0",
+        "opening-classes": "classes", "opening-grow": "float >= 0", "opening-bonus": "float >= 0",
         "face-classes": "classes", "face-grow": "float >= 0",
         "side-classes": "classes", "side-reach": "float > 0", "side-floor": "float",
         "relief-classes": "classes", "relief-ratio": "float > 0", "relief-gap": "float >= 0",

@@ -60,13 +60,15 @@ PIER = 0.15
 
 def fit_openings(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
                  points_in_metric: Callable[[np.ndarray, np.ndarray], np.ndarray], classes: tuple[str, ...],
-                 grow: float, extent: np.ndarray) -> np.ndarray:
+                 grow: float, extent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Set in place the width and height (canonical metres) of the detections of ``classes`` to their opening's
     (see the module doc); ``extent``: the space's size in canonical metres.  Returns whether each detection's
-    opening was followed along the wall past the search (a ribbon's)."""
+    opening was followed along the wall past the search (a ribbon's), and whether it was found with a sill (its
+    bottom more than a cell above the space's floor: a window's, not a doorway's)."""
     codes = [ELEMENT_CLASSES.index(c) for c in classes]
     ext = np.asarray(extent, dtype=np.float64)
     followed = np.zeros(len(lo_m), dtype=bool)
+    sill = np.zeros(len(lo_m), dtype=bool)
     for i in np.nonzero(np.isin(np.asarray(class_code), codes))[0]:
         a = 0 if hi_m[i, 0] - lo_m[i, 0] <= hi_m[i, 1] - lo_m[i, 1] else 1  # the wall's normal
         b = 1 - a
@@ -95,7 +97,8 @@ def fit_openings(lo_m: np.ndarray, hi_m: np.ndarray, class_code: np.ndarray,
             followed[i] = ends[0] < b0 or ends[1] > b1
             b0, b1 = ends
         lo_m[i, b], hi_m[i, b], lo_m[i, 2], hi_m[i, 2] = b0, b1, z0, z1
-    return followed
+        sill[i] = z0 > cell
+    return followed, sill
 
 
 def cells(span: tuple[float, float], origin: float, n: int, cell: float) -> slice:

@@ -58,6 +58,7 @@ class DetectionSettings:
     footprint_grow: float = 0.1
     opening_classes: tuple[str, ...] = ("window",)
     opening_grow: float = 1.5
+    opening_bonus: float = 2.0
     side_classes: tuple[str, ...] = ("wall",)
     side_reach: float = 0.3
     side_floor: float = -3.0
@@ -89,6 +90,8 @@ class DetectionSettings:
             raise ValueError("planar-depth and planar-beside must be > 0, planar-quantile in [0, 0.5)")
         if self.opening_grow < 0:
             raise ValueError(f"opening-grow must be >= 0, got {self.opening_grow}")
+        if not np.isfinite(self.opening_bonus) or self.opening_bonus < 0:
+            raise ValueError(f"opening-bonus must be a finite number >= 0, got {self.opening_bonus}")
         if self.top_reach < 0:
             raise ValueError(f"top-reach must be >= 0, got {self.top_reach}")
         if self.footprint_grow < 0:

@@ -117,8 +117,9 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
         lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(~bare, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat,
                                                                     sure)  # nothing stands out of the wall there
     if settings.refine and index is not None and settings.opening_classes:  # windows as their openings
-        followed = fit_openings(lo_m, hi_m, cls_all, index.points_in_metric, settings.opening_classes,
-                                settings.opening_grow, np.asarray(vol.frame.extent, float))
+        followed, sill = fit_openings(lo_m, hi_m, cls_all, index.points_in_metric, settings.opening_classes,
+                                      settings.opening_grow, np.asarray(vol.frame.extent, float))
+        score = score + settings.opening_bonus * sill  # a window's opening in the wall: its evidence
         keep = one_per_opening(lo_m, hi_m, score, followed, settings.nms_iou)  # a ribbon's pieces make one
         lo, hi, lo_m, hi_m, score, cls_all, at_all_cat, sure = kept(keep, lo, hi, lo_m, hi_m, score, cls_all, at_all_cat,
                                                                     sure)

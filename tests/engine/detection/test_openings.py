@@ -68,6 +68,10 @@ def test_opening_settings():
     assert DetectionSettings.from_config(opening_classes="").opening_classes == ()
     with pytest.raises(ValueError, match="opening-grow"):
         DetectionSettings(opening_grow=-1.0)
+    assert DetectionSettings.from_config().opening_bonus == 2.0
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="opening-bonus"):
+            DetectionSettings(opening_bonus=bad)
 
 
 def test_a_ribbon_longer_than_the_search_is_followed_along_the_wall():
@@ -106,8 +110,23 @@ def test_fit_openings_says_which_openings_it_followed():
     rng = np.random.default_rng(4)
     pts = _wall_with_window(rng, 0.5, 7.5, 0.9, 2.1)
     lo, hi = np.array([[3.0, 0.05, 0.8], [0.6, 0.05, 0.9]]), np.array([[4.5, 0.37, 2.2], [7.4, 0.37, 2.1]])
-    followed = fit_openings(lo, hi, np.array([WINDOW, WINDOW]), _query(pts), ("window",), 1.0, EXTENT)
+    followed, sill = fit_openings(lo, hi, np.array([WINDOW, WINDOW]), _query(pts), ("window",), 1.0, EXTENT)
     assert followed.tolist() == [True, False]  # the second box's search holds the whole opening
+    assert sill.tolist() == [True, True]
+
+
+def test_an_opening_counts_as_a_window_s_only_with_a_sill():
+    """An opening whose bottom is above the floor (a sill) is a window's evidence; a doorway reaching the floor,
+    a solid wall and another class's detection are not."""
+    rng = np.random.default_rng(9)
+    window = _wall_with_window(rng, 2.0, 3.5, 0.9, 2.1)
+    doorway = _wall_with_window(rng, 2.0, 3.0, 0.0, 2.1)
+    solid = _wall_with_window(rng, 0.0, 0.0, 0.0, 0.0)
+    for pts, classes, want in ((window, ("window",), True), (doorway, ("window",), False),
+                               (solid, ("window",), False), (window, ("board",), False)):
+        lo, hi = np.array([[1.9, 0.05, 0.5]]), np.array([[3.6, 0.37, 2.3]])
+        _, sill = fit_openings(lo, hi, np.array([WINDOW]), _query(pts), classes, 1.0, EXTENT)
+        assert sill.tolist() == [want]
 
 
 def _fitted(points, lo, hi, grow):

@@ -263,3 +263,45 @@ def test_a_board_box_on_a_bare_wall_is_not_kept_by_detection():
     assert len(kept) == 1 and 2.0 < kept[0] < 4.6
     both = centres_y(DetectionSettings.from_config(face_classes=()))
     assert len(both) == 2 and 5.3 < both[1] < 7.7
+
+
+def test_a_window_over_an_opening_with_a_sill_gets_the_opening_bonus():
+    """``opening-bonus``: of two window boxes on one wall, the one over an opening (face points missing, glass
+    15 cm deeper, a sill 0.9 m up) scores ``opening-bonus`` more than without it; the one over solid wall the
+    same."""
+    from engine.detection.canonical import CanonicalFrame
+    from engine.detection.model import load_model
+    from engine.detection.space import detect_in_volume, prepare_indexed
+    from engine.spaces.points import SpacePoints
+
+    rng = np.random.default_rng(12)
+    ext = np.array([5.0, 8.0, 3.0])
+    room = [rng.uniform([0, 0, 0], [5, 8, 0], (60000, 3)), rng.uniform([0, 0, 3], [5, 8, 3], (60000, 3))]
+    for axis, at in ((0, 0.2), (0, 5.0), (1, 0.0), (1, 8.0)):
+        w = rng.uniform(0, 1, (60000, 3)) * ext
+        w[:, axis] = at
+        room.append(w)
+    wall = room[2]  # x = 0.2: a window opening over y 2.0-3.5, z 0.9-2.1, its glass at x = 0.05
+    hole = (wall[:, 1] > 2.0) & (wall[:, 1] < 3.5) & (wall[:, 2] > 0.9) & (wall[:, 2] < 2.1)
+    wall[hole, 0] = 0.05
+    xyz = np.concatenate(room) + rng.normal(0, 0.002, (len(room) * 60000, 3))
+    xyz[:, 0] = np.clip(xyz[:, 0], 0.0, 5.0)
+    pts = SpacePoints(0, xyz, np.full((len(xyz), 3), 0.6))
+    model = load_model(None)
+    vol, index = prepare_indexed(pts, model, CanonicalFrame(0.0, [0, 0, -0.001], ext + [0, 0, 0.002]))
+    window = CLASS_CODES["window"]
+    atom = next(i for i, a in enumerate(model.dictionary.atoms_) if a.class_code == window)
+    vox = vol.grid.voxel
+    lo = np.round(np.array([[0.0, 1.8, 0.8], [0.0, 5.6, 0.8]]) / vox).astype(np.int64)
+    hi = np.round(np.array([[0.3, 3.7, 2.2], [0.3, 7.4, 2.2]]) / vox).astype(np.int64)
+    found = {atom: (lo, hi, np.array([5.0, 5.0]), np.array([atom, atom]), np.zeros(2, bool))}
+
+    def scores(bonus):
+        det = detect_in_volume(vol, model, DetectionSettings.from_config(opening_bonus=bonus), index, [window], found)
+        mine = det.class_code == window
+        order = np.argsort(((det.lo_m + det.hi_m) / 2)[mine, 1])
+        return det.score[mine][order]
+
+    with_bonus, without = scores(2.0), scores(0.0)
+    assert len(with_bonus) == 2 == len(without)
+    assert with_bonus[0] - without[0] == pytest.approx(2.0) and with_bonus[1] == pytest.approx(without[1])
