@@ -226,37 +226,53 @@ def test_footprint_classes_move_only_their_detections_horizontal_sides(buildings
     assert moved > 0
 
 
-def test_a_board_box_on_a_bare_wall_is_not_kept_by_detection():
-    """``face-classes``: of two board windows on one wall, the one over a board standing 2 cm out of it is kept and
-    the one over bare wall is dropped (engine.detection.faces.fit_faces's ``bare``); with ``face-classes`` empty
-    both stay."""
+def _two_boxes(room, ext, rng, cls, lo_m, hi_m):
+    """``detect(settings)``: detect_in_volume over the points of ``room`` (2 mm of noise added) on two injected
+    ``cls`` windows of one atom, boxes ``lo_m``-``hi_m`` (metres), both scored 5."""
     from engine.detection.canonical import CanonicalFrame
     from engine.detection.model import load_model
     from engine.detection.space import detect_in_volume, prepare_indexed
     from engine.spaces.points import SpacePoints
 
-    rng = np.random.default_rng(11)
-    ext = np.array([5.0, 8.0, 3.0])
-    room = [rng.uniform([0, 0, 0], [5, 8, 0], (60000, 3)), rng.uniform([0, 0, 3], [5, 8, 3], (60000, 3))]
-    for axis, at in ((0, 0.0), (0, 5.0), (1, 0.0), (1, 8.0)):
-        w = rng.uniform(0, 1, (60000, 3)) * ext
-        w[:, axis] = at
-        room.append(w)
-    wall = room[2]  # x = 0: a board 2 cm proud over y 2.0-4.6, z 0.9-2.05; bare wall over y 5.3-7.7
-    wall[:, 0] += np.where((wall[:, 1] > 2.0) & (wall[:, 1] < 4.6) & (wall[:, 2] > 0.9) & (wall[:, 2] < 2.05), 0.02, 0)
     xyz = np.concatenate(room) + rng.normal(0, 0.002, (len(room) * 60000, 3))
+    xyz[:, 0] = np.clip(xyz[:, 0], 0.0, ext[0])
     pts = SpacePoints(0, xyz, np.full((len(xyz), 3), 0.6))
     model = load_model(None)
     vol, index = prepare_indexed(pts, model, CanonicalFrame(0.0, [0, 0, -0.001], ext + [0, 0, 0.002]))
-    board = CLASS_CODES["board"]
-    atom = next(i for i, a in enumerate(model.dictionary.atoms_) if a.class_code == board)
-    vox = vol.grid.voxel
-    lo = np.round(np.array([[0.0, 2.2, 1.0], [0.0, 5.6, 1.0]]) / vox).astype(np.int64)
-    hi = np.round(np.array([[0.1, 4.4, 2.0], [0.1, 7.4, 2.0]]) / vox).astype(np.int64)
+    code = CLASS_CODES[cls]
+    atom = next(i for i, a in enumerate(model.dictionary.atoms_) if a.class_code == code)
+    lo = np.round(np.asarray(lo_m) / vol.grid.voxel).astype(np.int64)
+    hi = np.round(np.asarray(hi_m) / vol.grid.voxel).astype(np.int64)
     found = {atom: (lo, hi, np.array([5.0, 5.0]), np.array([atom, atom]), np.zeros(2, bool))}
+    return lambda settings: detect_in_volume(vol, model, settings, index, [code], found)
+
+
+def _room(rng, ext, x0):
+    """The points of a room ``ext`` metres: floor, ceiling and four walls, 60,000 points each, its first wall at
+    x = ``x0`` (the third array)."""
+    room = [rng.uniform([0, 0, 0], [ext[0], ext[1], 0], (60000, 3)),
+            rng.uniform([0, 0, ext[2]], ext, (60000, 3))]
+    for axis, at in ((0, x0), (0, ext[0]), (1, 0.0), (1, ext[1])):
+        w = rng.uniform(0, 1, (60000, 3)) * ext
+        w[:, axis] = at
+        room.append(w)
+    return room
+
+
+def test_a_board_box_on_a_bare_wall_is_not_kept_by_detection():
+    """``face-classes``: of two board windows on one wall, the one over a board standing 2 cm out of it is kept and
+    the one over bare wall is dropped (engine.detection.faces.fit_faces's ``bare``); with ``face-classes`` empty
+    both stay."""
+    rng = np.random.default_rng(11)
+    ext = np.array([5.0, 8.0, 3.0])
+    room = _room(rng, ext, 0.0)
+    wall = room[2]  # x = 0: a board 2 cm proud over y 2.0-4.6, z 0.9-2.05; bare wall over y 5.3-7.7
+    wall[:, 0] += np.where((wall[:, 1] > 2.0) & (wall[:, 1] < 4.6) & (wall[:, 2] > 0.9) & (wall[:, 2] < 2.05), 0.02, 0)
+    board = CLASS_CODES["board"]
+    detect = _two_boxes(room, ext, rng, "board", [[0.0, 2.2, 1.0], [0.0, 5.6, 1.0]], [[0.1, 4.4, 2.0], [0.1, 7.4, 2.0]])
 
     def centres_y(settings):
-        det = detect_in_volume(vol, model, settings, index, [board], found)
+        det = detect(settings)
         return sorted(((det.lo_m + det.hi_m) / 2)[det.class_code == board, 1].round(1))
 
     kept = centres_y(DetectionSettings.from_config())
@@ -269,35 +285,17 @@ def test_a_window_over_an_opening_with_a_sill_gets_the_opening_bonus():
     """``opening-bonus``: of two window boxes on one wall, the one over an opening (face points missing, glass
     15 cm deeper, a sill 0.9 m up) scores ``opening-bonus`` more than without it; the one over solid wall the
     same."""
-    from engine.detection.canonical import CanonicalFrame
-    from engine.detection.model import load_model
-    from engine.detection.space import detect_in_volume, prepare_indexed
-    from engine.spaces.points import SpacePoints
-
     rng = np.random.default_rng(12)
     ext = np.array([5.0, 8.0, 3.0])
-    room = [rng.uniform([0, 0, 0], [5, 8, 0], (60000, 3)), rng.uniform([0, 0, 3], [5, 8, 3], (60000, 3))]
-    for axis, at in ((0, 0.2), (0, 5.0), (1, 0.0), (1, 8.0)):
-        w = rng.uniform(0, 1, (60000, 3)) * ext
-        w[:, axis] = at
-        room.append(w)
+    room = _room(rng, ext, 0.2)
     wall = room[2]  # x = 0.2: a window opening over y 2.0-3.5, z 0.9-2.1, its glass at x = 0.05
     hole = (wall[:, 1] > 2.0) & (wall[:, 1] < 3.5) & (wall[:, 2] > 0.9) & (wall[:, 2] < 2.1)
     wall[hole, 0] = 0.05
-    xyz = np.concatenate(room) + rng.normal(0, 0.002, (len(room) * 60000, 3))
-    xyz[:, 0] = np.clip(xyz[:, 0], 0.0, 5.0)
-    pts = SpacePoints(0, xyz, np.full((len(xyz), 3), 0.6))
-    model = load_model(None)
-    vol, index = prepare_indexed(pts, model, CanonicalFrame(0.0, [0, 0, -0.001], ext + [0, 0, 0.002]))
     window = CLASS_CODES["window"]
-    atom = next(i for i, a in enumerate(model.dictionary.atoms_) if a.class_code == window)
-    vox = vol.grid.voxel
-    lo = np.round(np.array([[0.0, 1.8, 0.8], [0.0, 5.6, 0.8]]) / vox).astype(np.int64)
-    hi = np.round(np.array([[0.3, 3.7, 2.2], [0.3, 7.4, 2.2]]) / vox).astype(np.int64)
-    found = {atom: (lo, hi, np.array([5.0, 5.0]), np.array([atom, atom]), np.zeros(2, bool))}
+    detect = _two_boxes(room, ext, rng, "window", [[0.0, 1.8, 0.8], [0.0, 5.6, 0.8]], [[0.3, 3.7, 2.2], [0.3, 7.4, 2.2]])
 
     def scores(bonus):
-        det = detect_in_volume(vol, model, DetectionSettings.from_config(opening_bonus=bonus), index, [window], found)
+        det = detect(DetectionSettings.from_config(opening_bonus=bonus))
         mine = det.class_code == window
         order = np.argsort(((det.lo_m + det.hi_m) / 2)[mine, 1])
         return det.score[mine][order]
