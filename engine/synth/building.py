@@ -341,7 +341,10 @@ class Building:
         ``gt_instance`` -1, class clutter).  Boxes contain all of their
         instance's points (geometry grown by the space's noise bound, 3 sigma +
         1 mm, and by the residual registration error of its scan positions; a
-        registered space's boxes move with its scan).
+        registered space's boxes move with its scan and keep the building's axes,
+        each the box of those axes that encloses its turned self: S3DIS's boxes,
+        and the foreign buildings', are in the building's frame, and a scan's
+        registration error does not turn the walls that were built).
         ``counts`` is ``{"spaces": {id: n}, "elements": {id: n}}``.
 
         With hard scan conditions (:mod:`engine.synth.hard.hardness`), also: per
@@ -358,10 +361,13 @@ class Building:
             fp = [[float(x), float(y)] for x, y in fr.xy(s.footprint)]
             spaces.append(GTSpace(s.id, s.name, s.type, s.floor, fp,
                                   [float(s.z0 + fr.offset[2]), float(s.z1 + fr.offset[2])]))
+            turn = s.registration_yaw  # the scan's error turns the element's points, not the building's axes
+            cos, sin = abs(math.cos(turn)), abs(math.sin(turn))
             for e in s.elements:
                 c = fr.xyz(s.registered(e.center[None]))[0]
+                sx, sy, sz = (float(v) for v in e.size)
                 elements.append(GTElement(e.id, e.cls, e.class_code, s.id, [float(v) for v in c],
-                                          [float(v) for v in e.size], float(fr.angle(e.yaw + s.registration_yaw))))
+                                          [cos * sx + sin * sy, sin * sx + cos * sy, sz], float(fr.angle(e.yaw))))
         doc = make_doc(spaces, elements)
         for d, s in zip(doc["spaces"], self.spaces):
             self._space_doc(d, s, counts, hard)

@@ -44,8 +44,9 @@ name               what it adds (level 1), and where
 =================  =====================================================================================
 
 Ground truth stays exact: every planned element keeps one instance whose box
-contains all of its points (registration moves the boxes with the points; the
-per-scan-position residual is added to the box margin).  Two kinds of points
+contains all of its points (registration moves the boxes with the points, and
+they keep the building's axes, enclosing the turned box; the per-scan-position
+residual is added to the box margin).  Two kinds of points
 are not surfaces of the plan, and their labels are a decision:
 
 * **flying points** lie in the space they were scanned from (inside its footprint

@@ -55,6 +55,27 @@ def test_registration_offsets_are_measurable_between_two_rooms(registered):
     assert set(reg) == {"offset", "yaw_deg", "pivot"} and abs(reg["yaw_deg"]) <= 0.4
 
 
+def test_registered_boxes_keep_the_buildings_axes(registered):
+    """A scan's registration error turns its points, not the walls that were built: every box keeps its element's
+    yaw (S3DIS's boxes are in the building's frame) and grows to enclose its turned self (a long wall's box is
+    thicker by its length times the sine of the turn)."""
+    b, _ = registered
+    gt = {e["id"]: e for e in b.ground_truth()["elements"]}
+    grown = 0
+    for s in b.spaces:
+        turn = abs(s.registration_yaw)
+        for e in s.elements:
+            g = gt[e.id]
+            assert g["yaw"] == pytest.approx(b.frame.angle(e.yaw), abs=1e-12)
+            sx, sy = float(e.size[0]), float(e.size[1])
+            assert g["size"][:2] == pytest.approx([math.cos(turn) * sx + math.sin(turn) * sy,
+                                                   math.sin(turn) * sx + math.cos(turn) * sy], abs=1e-9)
+            if e.cls == "wall" and max(sx, sy) > 3.0 and turn > math.radians(0.1):
+                assert min(g["size"][:2]) > min(sx, sy) + 0.9 * max(sx, sy) * math.sin(turn)
+                grown += 1
+    assert grown > 0
+
+
 def test_scan_positions_of_one_room_double_its_faces(registered):
     """Each scan position has its own residual error: a face seen from two of them is two parallel sheets."""
     b, cols = registered
