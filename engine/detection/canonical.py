@@ -182,6 +182,11 @@ def refine_yaw(xyz: np.ndarray, yaw: float, *, span: float = np.radians(1.5), bi
     return _wrap_quarter(best)
 
 
+def manhattan_yaw(xyz: np.ndarray) -> float:
+    """A space's own Manhattan yaw in ``(-pi/4, pi/4]``: :func:`dominant_yaw` sharpened by :func:`refine_yaw`."""
+    return refine_yaw(xyz, dominant_yaw(xyz))
+
+
 def _robust_box(m: np.ndarray, quantile: float) -> tuple[np.ndarray, np.ndarray]:
     if len(m) == 0:
         return np.zeros(3), np.ones(3)
@@ -261,7 +266,7 @@ def estimate_frame(xyz: np.ndarray, *, connection: np.ndarray | None = None, qua
     xyz = np.asarray(xyz, dtype=np.float64)
     if len(xyz) < 4:
         raise ValueError("a space needs at least 4 points for a canonical frame")
-    base = _wrap_quarter(refine_yaw(xyz, dominant_yaw(xyz)) if yaw is None else float(yaw))
+    base = manhattan_yaw(xyz) if yaw is None else _wrap_quarter(float(yaw))
     # statistics of the box from an evenly strided subsample of large spaces (deterministic)
     sub = xyz[::max(1, len(xyz) // 400_000)]
     center = np.median(sub, axis=0)

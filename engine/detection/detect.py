@@ -1,7 +1,9 @@
 """Element detection as a pipeline stage: sliding windows per space, as dask tasks (paper section 4).
 
 :func:`detect` runs :func:`engine.detection.space.detect_space` on every space of a store, one task each (its
-points gathered from the tiles it touches), the largest spaces first, and numbers the proposals.
+points gathered from the tiles it touches), the largest spaces first, and numbers the proposals.  First every
+space's own yaw, one task each, so that each space is detected in its group's orientation
+(:mod:`engine.detection.orientations`).
 The steps in a space and the reasons for them: ``docs/design/detection.md``.
 Settings: ``buildingparser.detection.*`` (``engine/detection/detection.yaml``).
 """
@@ -11,7 +13,9 @@ import logging
 
 import numpy as np
 
+from engine.detection.canonical import manhattan_yaw
 from engine.detection.model import Model, load_model
+from engine.detection.orientations import reference_yaws, wrap_quarter
 from engine.detection.proposals import Proposal
 from engine.detection.settings import DetectionSettings
 from engine.detection.space import detect_space
@@ -66,11 +70,31 @@ def without_sparse(refs: list[SpaceRef], doc: dict | None, ratio: float) -> list
     return kept
 
 
-def _detect_task(job: tuple[SpaceRef, np.ndarray | None], store, model: Model, space_array: str,
+def _yaw_task(ref: SpaceRef, store, space_array: str) -> float:
+    return manhattan_yaw(load_space(store, ref, space_array).xyz)
+
+
+def _detect_task(job: tuple[SpaceRef, np.ndarray | None, float | None], store, model: Model, space_array: str,
                  settings: DetectionSettings) -> list[Proposal]:
-    ref, hint = job
+    ref, hint, yaw = job
     points = load_space(store, ref, space_array)
-    return detect_space(points, model, settings, np.asarray(store.meta.origin, dtype=np.float64), hint)
+    return detect_space(points, model, settings, np.asarray(store.meta.origin, dtype=np.float64), hint, yaw)
+
+
+def space_yaws(store, refs: list[SpaceRef], client=None, space_array: str = "space_id",
+               tolerance_deg: float = 1.0) -> list[float | None]:
+    """The yaw each space of ``refs`` is detected in (:mod:`engine.detection.orientations`): its group's, from
+    every space's own (one task per space); all None (each its own) when ``tolerance_deg`` is 0."""
+    if tolerance_deg <= 0 or not refs:
+        return [None] * len(refs)
+    own = run_tasks(_yaw_task, refs, client=client, label="space orientations",
+                    keys=[f"yaw of space {r.space_id}" for r in refs], extra_args=(store, space_array))
+    ref = reference_yaws(np.array(own, dtype=np.float64), np.radians(tolerance_deg))
+    turned = np.degrees(np.abs(wrap_quarter(np.array(own) - ref)))
+    logger.info("detection: %d of %d spaces detected in their group's orientation (turned by %.2f degrees at "
+                "most, median %.2f)", int(np.count_nonzero(turned > 0)), len(refs), float(turned.max()),
+                float(np.median(turned)))
+    return [float(y) for y in ref]
 
 
 def detect(store, *, model: Model | str | None = None, client=None, space_array: str = "space_id",
@@ -110,7 +134,8 @@ def detect(store, *, model: Model | str | None = None, client=None, space_array:
     # one worker idle (a space's task time grows with its points; the medium bench_run building, 15 spaces on
     # 2 workers: the largest space, 20 % of the stage's task seconds, came ninth by id and ran alone at the end)
     refs = by_size(refs)
-    results = run_tasks(_detect_task, [(r, hints.get(r.space_id)) for r in refs], client=client,
+    yaws = space_yaws(store, refs, client, space_array, settings.orientation_tolerance)
+    results = run_tasks(_detect_task, [(r, hints.get(r.space_id), y) for r, y in zip(refs, yaws)], client=client,
                         label="detect elements",
                         keys=[f"space {r.space_id}" for r in refs],
                         extra_args=(store, model_arg, space_array, settings))

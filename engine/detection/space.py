@@ -35,9 +35,10 @@ from engine.spaces.points import SpacePoints
 from tiles.classes import ELEMENT_CLASSES
 
 
-def space_frame(points: SpacePoints, connection: np.ndarray | None = None) -> CanonicalFrame:
-    """The canonical frame of a space (store-local coordinates), the same at training and run time."""
-    return estimate_frame(points.xyz, connection=connection)
+def space_frame(points: SpacePoints, connection: np.ndarray | None = None, yaw: float | None = None) -> CanonicalFrame:
+    """The canonical frame of a space (store-local coordinates), the same at training and run time; ``yaw``: its
+    Manhattan orientation given (its group's, :mod:`engine.detection.orientations`) instead of its own."""
+    return estimate_frame(points.xyz, connection=connection, yaw=yaw)
 
 
 def prepare_space(points: SpacePoints, model: Model, frame: CanonicalFrame | None = None) -> SpaceVolume:
@@ -187,11 +188,12 @@ def to_proposals(det: Detections, vol: SpaceVolume, model: Model, space_id: int,
 
 
 def detect_space(points: SpacePoints, model: Model, settings: DetectionSettings | None = None,
-                 origin: np.ndarray | None = None, connection: np.ndarray | None = None) -> list[Proposal]:
-    """All proposals of one space (its points in store-local coordinates)."""
+                 origin: np.ndarray | None = None, connection: np.ndarray | None = None,
+                 yaw: float | None = None) -> list[Proposal]:
+    """All proposals of one space (its points in store-local coordinates), in a frame of ``yaw`` (its own: None)."""
     settings = settings or DetectionSettings.from_config()
     if len(points.xyz) < max(settings.min_window_points, 4):
         return []
-    vol, index = prepare_indexed(points, model, space_frame(points, connection), settings.refine)
+    vol, index = prepare_indexed(points, model, space_frame(points, connection, yaw), settings.refine)
     det = detect_in_volume(vol, model, settings, index)
     return to_proposals(det, vol, model, points.space_id, np.zeros(3) if origin is None else origin)

@@ -50,18 +50,43 @@ def test_largest_spaces_are_submitted_first_with_the_same_proposals(buildings, t
     sent = []
     real = det.run_tasks
 
-    def spy(fn, items, **kw):
-        sent.append([ref for ref, _ in items])
+    def spy(fn, items, **kw):  # the spaces' own yaws, then their detection: both in this order
+        sent.append([job[0] if isinstance(job, tuple) else job for job in items])
         return real(fn, items, **kw)
 
     monkeypatch.setattr(det, "run_tasks", spy)
     props = detect(store, model=trained, client=client, space_array="gt_space")
     counts = [r.count for r in sent[0]]
     assert len(counts) > 2 and counts == sorted(counts, reverse=True) and sent[0] != sorted(sent[0], key=lambda r: r.space_id)
+    assert len(sent) == 2 and sent[1] == sent[0]
     monkeypatch.setattr(det, "by_size", lambda refs: refs)  # id order, as before
     before = detect(store, model=trained, client=client, space_array="gt_space")
     assert [(p.element_id, p.space_id, p.class_code, p.score, tuple(p.center), tuple(p.world_size)) for p in props] \
         == [(p.element_id, p.space_id, p.class_code, p.score, tuple(p.center), tuple(p.world_size)) for p in before]
+
+
+def test_every_space_is_detected_in_its_groups_orientation(buildings, trained, client):
+    """The spaces' own yaws differ by their estimates' errors; each space is detected in their median's frame
+    (the building's walls are parallel), and in its own with orientation-tolerance 0."""
+    from engine.detection.canonical import manhattan_yaw
+    from engine.detection.orientations import wrap_quarter
+    from engine.spaces.points import index_spaces, load_space
+
+    _, stores = buildings
+    store = stores["test"]
+    refs = index_spaces(store, "gt_space")
+    own = {r.space_id: float(manhattan_yaw(load_space(store, r, "gt_space").xyz)) for r in refs}
+    assert np.ptp(list(own.values())) > 1e-6  # the estimates differ (by hundredths of a degree)
+
+    def yaws(props):
+        return {p.space_id: float(wrap_quarter(p.yaw)) for p in props}
+
+    grouped = yaws(detect(store, model=trained, client=client, space_array="gt_space"))
+    assert set(grouped) == set(own)
+    assert np.allclose(list(grouped.values()), np.median(list(own.values())), atol=1e-12)
+    alone = yaws(detect(store, model=trained, client=client, space_array="gt_space",
+                        settings=DetectionSettings.from_config(orientation_tolerance=0.0)))
+    assert all(abs(float(wrap_quarter(alone[k] - own[k]))) < 1e-12 for k in own)
 
 
 def test_training_again_on_the_same_data_writes_the_same_model(buildings, client, tmp_path):
