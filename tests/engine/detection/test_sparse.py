@@ -90,8 +90,11 @@ def strays(tmp_path_factory):
 def test_a_stray_space_gets_no_elements_and_the_rooms_keep_theirs(strays, trained, client):
     store, stray = strays
     assert list(sparse_spaces(store.doc("spaces"), 0.1)) == [stray]
-    props = detect(store, model=trained, client=client)
-    every = detect(store, model=trained, client=client, settings=DetectionSettings.from_config(min_space_density=0.0))
+    # each space in its own frame: detected, the stray space (points of a room) would join the rooms' orientation
+    # group and move its median (engine/detection/orientations.py); left out, it cannot
+    props = detect(store, model=trained, client=client, settings=DetectionSettings.from_config(orientation_tolerance=0.0))
+    every = detect(store, model=trained, client=client,
+                   settings=DetectionSettings.from_config(min_space_density=0.0, orientation_tolerance=0.0))
     # without the rule the stray space gets at least its floor and its ceiling (one-per-space-always)
     assert {p.class_name for p in every if p.space_id == stray} >= {"floor", "ceiling"}
     assert not [p for p in props if p.space_id == stray]
