@@ -70,8 +70,9 @@ def without_sparse(refs: list[SpaceRef], doc: dict | None, ratio: float) -> list
     return kept
 
 
-def _yaw_task(ref: SpaceRef, store, space_array: str) -> float:
-    return manhattan_yaw(load_space(store, ref, space_array).xyz)
+def _yaw_task(ref: SpaceRef, store, space_array: str, min_points: int) -> float:
+    xyz = load_space(store, ref, space_array).xyz
+    return manhattan_yaw(xyz) if len(xyz) >= min_points else float("nan")  # too few points to detect in
 
 
 def _detect_task(job: tuple[SpaceRef, np.ndarray | None, float | None], store, model: Model, space_array: str,
@@ -82,19 +83,22 @@ def _detect_task(job: tuple[SpaceRef, np.ndarray | None, float | None], store, m
 
 
 def space_yaws(store, refs: list[SpaceRef], client=None, space_array: str = "space_id",
-               tolerance_deg: float = 1.0) -> list[float | None]:
+               tolerance_deg: float = 1.0, min_points: int = 4) -> list[float | None]:
     """The yaw each space of ``refs`` is detected in (:mod:`engine.detection.orientations`): its group's, from
-    every space's own (one task per space); all None (each its own) when ``tolerance_deg`` is 0."""
+    every space's own (one task per space); all None (each its own) when ``tolerance_deg`` is 0, None for a space
+    under ``min_points`` points (no detection there: no say in its group's yaw)."""
     if tolerance_deg <= 0 or not refs:
         return [None] * len(refs)
-    own = run_tasks(_yaw_task, refs, client=client, label="space orientations",
-                    keys=[f"yaw of space {r.space_id}" for r in refs], extra_args=(store, space_array))
-    ref = reference_yaws(np.array(own, dtype=np.float64), np.radians(tolerance_deg))
-    turned = np.degrees(np.abs(wrap_quarter(np.array(own) - ref)))
-    logger.info("detection: %d of %d spaces detected in their group's orientation (turned by %.2f degrees at "
-                "most, median %.2f)", int(np.count_nonzero(turned > 0)), len(refs), float(turned.max()),
-                float(np.median(turned)))
-    return [float(y) for y in ref]
+    own = np.array(run_tasks(_yaw_task, refs, client=client, label="space orientations",
+                             keys=[f"yaw of space {r.space_id}" for r in refs],
+                             extra_args=(store, space_array, min_points)), dtype=np.float64)
+    ref = reference_yaws(own, np.radians(tolerance_deg))
+    turned = np.degrees(np.abs(wrap_quarter(own - ref)))[np.isfinite(own)]
+    if len(turned):
+        logger.info("detection: %d of %d spaces detected in their group's orientation (turned by %.2f degrees at "
+                    "most, median %.2f)", int(np.count_nonzero(turned > 0)), len(refs), float(turned.max()),
+                    float(np.median(turned)))
+    return [float(y) if np.isfinite(y) else None for y in ref]
 
 
 def detect(store, *, model: Model | str | None = None, client=None, space_array: str = "space_id",
@@ -134,7 +138,8 @@ def detect(store, *, model: Model | str | None = None, client=None, space_array:
     # one worker idle (a space's task time grows with its points; the medium bench_run building, 15 spaces on
     # 2 workers: the largest space, 20 % of the stage's task seconds, came ninth by id and ran alone at the end)
     refs = by_size(refs)
-    yaws = space_yaws(store, refs, client, space_array, settings.orientation_tolerance)
+    yaws = space_yaws(store, refs, client, space_array, settings.orientation_tolerance,
+                      max(settings.min_window_points, 4))
     results = run_tasks(_detect_task, [(r, hints.get(r.space_id), y) for r, y in zip(refs, yaws)], client=client,
                         label="detect elements",
                         keys=[f"space {r.space_id}" for r in refs],

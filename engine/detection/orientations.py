@@ -35,9 +35,15 @@ def reference_yaws(yaws: np.ndarray, tolerance: float) -> np.ndarray:
     degrees), or its own when it lies farther than ``tolerance`` (radians) from it.
 
     Groups: the yaws sorted around the quarter circle, cut where two neighbours are more than ``tolerance``
-    apart (the circle opened at its widest gap).  Returns values in ``[-45, 45)`` degrees.
+    apart (the circle opened at its widest gap).  Returns values in ``[-45, 45)`` degrees; a NaN (a space too
+    small to have a yaw of its own) stays NaN and takes no part.
     """
     q = wrap_quarter(np.asarray(yaws, dtype=np.float64).reshape(-1))
+    known = np.isfinite(q)
+    if not known.all():
+        out = q.copy()
+        out[known] = reference_yaws(q[known], tolerance)
+        return out
     if len(q) == 0 or tolerance <= 0:
         return q
     order = np.argsort(q, kind="stable")

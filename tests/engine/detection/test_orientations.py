@@ -30,3 +30,8 @@ def test_a_group_across_the_quarter_circles_seam_and_a_chain_too_long_for_the_to
 
 def test_tolerance_zero_keeps_every_space_in_its_own_yaw():
     assert reference_yaws(np.radians([0.3, 0.0]), 0.0) == pytest.approx(np.radians([0.3, 0.0]))
+
+
+def test_a_space_without_a_yaw_of_its_own_takes_no_part():
+    ref = np.degrees(reference_yaws(np.radians([0.2, np.nan, -0.2, 0.3]), DEG))
+    assert np.isnan(ref[1]) and ref[[0, 2, 3]] == pytest.approx([0.2] * 3)
