@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from engine.detection import moments as mom
+from engine.detection.orientations import QUARTER, wrap_quarter
 
 #: Sides of the aligned box, in the order of the quarter turns that bring each to ``y = 0``.
 SIDES = ("y-min", "x-max", "y-max", "x-min")
@@ -136,9 +137,8 @@ def dominant_yaw(xyz: np.ndarray, voxel: float = 0.25, max_cells: int = 400_000)
 
 def _wrap_quarter(a: float) -> float:
     """Angle modulo 90 degrees into ``(-pi/4, pi/4]``."""
-    q = np.pi / 2
-    a = (a + q / 2) % q - q / 2
-    return float(q / 2 if np.isclose(a, -q / 2) else a)
+    a = float(wrap_quarter(a))
+    return float(QUARTER / 2 if np.isclose(a, -QUARTER / 2) else a)
 
 
 def refine_yaw(xyz: np.ndarray, yaw: float, *, span: float = np.radians(1.5), bin_size: float = 0.01,
