@@ -100,6 +100,7 @@ SETTINGS: dict[str, Any] = {
         "planar-classes": "classes", "planar-depth": "float > 0", "planar-beside": "float > 0",
         "planar-quantile": "float in [0, 0.5)", "feature-points": "int >= 0",
         "min-space-density": "float in [0, 1)", "top-classes": "classes", "top-reach": "float >= 0",
+        "slab-classes": "classes", "slab-fraction": "float in [0, 1]",
         "footprint-classes": "classes", "footprint-grow": "float >= 0",
         "opening-classes": "classes", "opening-grow": "float >= 0", "opening-bonus": "float >= 0",
         "face-classes": "classes", "face-grow": "float >= 0",

@@ -54,6 +54,8 @@ class DetectionSettings:
     min_space_density: float = 0.1
     top_classes: tuple[str, ...] = ("bookcase",)
     top_reach: float = 0.6
+    slab_classes: tuple[str, ...] = ("ceiling", "floor")
+    slab_fraction: float = 0.02
     footprint_classes: tuple[str, ...] = ("chair",)
     footprint_grow: float = 0.1
     opening_classes: tuple[str, ...] = ("window",)
@@ -93,6 +95,8 @@ class DetectionSettings:
             raise ValueError(f"opening-grow must be >= 0, got {self.opening_grow}")
         if not np.isfinite(self.opening_bonus) or self.opening_bonus < 0:
             raise ValueError(f"opening-bonus must be a finite number >= 0, got {self.opening_bonus}")
+        if not 0 <= self.slab_fraction <= 1:
+            raise ValueError(f"slab-fraction must be in [0, 1], got {self.slab_fraction}")
         if self.top_reach < 0:
             raise ValueError(f"top-reach must be >= 0, got {self.top_reach}")
         if self.footprint_grow < 0:
@@ -109,7 +113,7 @@ class DetectionSettings:
         if unknown:
             raise ValueError(f"cut names unknown classes {sorted(unknown)}")
         for name in ("one_per_space", "refine_classes", "planar_classes", "hanging_classes", "top_classes",
-                     "footprint_classes", "opening_classes", "face_classes", "side_classes", "relief_classes"):
+                     "slab_classes", "footprint_classes", "opening_classes", "face_classes", "side_classes", "relief_classes"):
             setattr(self, name, element_class_list(getattr(self, name), name.replace("_", "-")))
 
     @classmethod

@@ -28,6 +28,7 @@ from engine.detection.relief import flat
 from engine.detection.reveal import refine_reveals
 from engine.detection.settings import DetectionSettings
 from engine.detection.sides import settle_sides
+from engine.detection.slabs import fit_slabs
 from engine.detection.surfaces import refine_surfaces
 from engine.detection.tops import fit_tops
 from engine.detection.volume import SpaceVolume
@@ -127,6 +128,8 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
     if settings.refine and index is not None and settings.top_classes:  # bookcases as tall as their points
         fit_tops(lo_m, hi_m, cls_all, index.points_in_metric, settings.top_classes, settings.top_reach,
                  np.asarray(vol.frame.extent, float))
+    if settings.refine and index is not None and settings.slab_classes:  # floors as wide as their own points
+        fit_slabs(lo_m, hi_m, cls_all, index.points_in_metric, settings.slab_classes, settings.slab_fraction)
     if settings.refine and index is not None and settings.footprint_classes:  # chairs as wide as their points
         fit_footprints(lo_m, hi_m, cls_all, index.points_in_metric, settings.footprint_classes,
                        settings.footprint_grow, np.asarray(vol.frame.extent, float))
