@@ -51,7 +51,7 @@ class SpaceSettings:
     #: (votes summed over ``refine_block`` m squares, smoothed over ``refine_smooth`` m), each parsed in
     #: its own frame.
     refine_separation_deg: float = 5.0
-    refine_min_second: float = 0.5
+    refine_min_second: float = 0.3
     refine_block: float = 0.5
     refine_smooth: float = 1.5
     #: Ridge dividers (walls seen as one dense surface) in the refinement: :mod:`engine.spaces.ridges`.
