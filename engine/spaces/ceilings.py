@@ -153,7 +153,9 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
     below ``step``: one ceiling, not a window that straddles the step, and not a beam with the ceiling beside
     it or its shadow), and their median heights differ by at least ``step`` metres.  Steps are followed from
     chunk to chunk like ridges (:func:`engine.spaces.ridges.ridge_lines`: a line runs ``min_run`` m at least, within one
-    pixel); a line within ``min_spacing`` of a ridge line over the same stretch is that wall and is left out.
+    pixel); where a ridge line runs within ``min_spacing`` of it, that stretch is the ridge's wall and is left out
+    (the rest of the line is kept where it runs ``min_run`` m at least: a wall seen as a ridge along part of its
+    length and as a ceiling step along the rest).
 
     With ``min_partition`` > 0 a run of a line is kept only where a partition stands under it
     (:func:`partition_support`): at least ``min_partition`` of its chunks, its first and last (the walls it
@@ -193,16 +195,33 @@ def step_lines(ceiling: Occupancy, p: CeilingSettings, ridge_params: RidgeSettin
             line = RidgeLine(axis, n0 + r.cut * px, tuple((a0 + a * c * px, a0 + b * c * px) for a, b in r.runs),
                              r.strength, n0 + (r.lo if r.lo is not None else r.cut) * px,
                              n0 + (r.hi if r.hi is not None else r.cut) * px)
-            if any(q.axis == axis and abs(q.cut - line.cut) < sp
-                   and any(q.covered(a, b) for a, b in line.runs) for q in ridges):
-                continue
+            runs = line.runs
             if band is not None:
                 runs = _held_runs(r, mask, lower, normal, along, band, n0, a0, px, p)
-                if not runs:
-                    continue
-                line = dataclasses.replace(line, runs=runs)
-            out.append(line)
+            # where a ridge line within min_spacing runs beside it, that is the same wall: only the rest counts
+            same = [q for q in ridges if q.axis == axis and abs(q.cut - line.cut) < sp]
+            runs = uncovered_runs(runs, same, int(round(ridge_params.min_run / bin_width))) if same else runs
+            if runs:
+                out.append(dataclasses.replace(line, runs=runs))
     return out
+
+
+def uncovered_runs(runs: Sequence[tuple[int, int]], lines: Sequence[RidgeLine], min_length: int
+                   ) -> tuple[tuple[int, int], ...]:
+    """The pieces of ``runs`` (``[a, b)`` bins) that none of the runs of ``lines`` covers, those of at least
+    ``min_length`` bins."""
+    cover = sorted(r for q in lines for r in q.runs)
+    out = []
+    for a, b in runs:
+        for c0, c1 in cover:
+            if c1 <= a or c0 >= b:
+                continue
+            if c0 - a >= min_length:
+                out.append((a, c0))
+            a = max(a, c1)
+        if b - a >= min_length:
+            out.append((a, b))
+    return tuple(out)
 
 
 @dataclass

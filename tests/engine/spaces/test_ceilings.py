@@ -257,3 +257,36 @@ def test_ceiling_params_from_the_settings():
     p = CeilingSettings.from_dict({"both-halves": False, "min-partition": "0.25", "floor-band": 0.3, "other": 1})
     assert p.both_halves is False and p.min_partition == 0.25 and p.floor_band == 0.3
     assert CeilingSettings.from_dict(CeilingSettings().to_dict()) == CeilingSettings()
+
+
+def test_a_ridge_along_part_of_a_step_line_leaves_the_rest_of_it():
+    """A wall seen as a ridge along part of its length and as a ceiling step along the rest (a hallway's glazed
+    side): the step line keeps the stretch the ridge does not cover, where it is long enough (it was dropped
+    whole before)."""
+    from engine.spaces.ceilings import step_lines
+    from engine.spaces.ridges import RidgeLine, RidgeSettings
+
+    rng = np.random.default_rng(3)
+    bu, bv, bz = _bins(_two_ceilings(rng))
+    occ = ceiling_occupancy(bu, bv, bz, BAND, P, BW, ZB)
+    cut, m = int(round(5.0 / BW)), int(round(1.0 / BW))
+
+    def steps(ridge_runs):
+        return step_lines(occ, P, RidgeSettings(), BW, ZB, [RidgeLine(0, cut, ridge_runs, 1.0)],
+                          points=(bu, bv, bz), floor_z=0)
+
+    lines = steps(((0, 2 * m),))  # a ridge over v 0-2 m of the 6 m step
+    assert len(lines) == 1
+    assert lines[0].covered(0, 2 * m) == 0 and lines[0].covered(2 * m, 6 * m) >= int(3.5 * m)
+    assert steps(((0, 4 * m),)) == []  # the rest (2 m) is shorter than a ridge line's min-run (3 m)
+    assert steps(((0, 6 * m),)) == []
+
+
+def test_uncovered_runs():
+    from engine.spaces.ceilings import uncovered_runs
+    from engine.spaces.ridges import RidgeLine
+
+    lines = [RidgeLine(0, 0, ((200, 400), (380, 500)), 1.0), RidgeLine(0, 3, ((900, 950),), 1.0)]
+    assert uncovered_runs([(0, 1000)], lines, 100) == ((0, 200), (500, 900))
+    assert uncovered_runs([(0, 1000)], lines, 300) == ((500, 900),)
+    assert uncovered_runs([(0, 150), (600, 800)], lines, 10) == ((0, 150), (600, 800))
