@@ -59,7 +59,7 @@ SETTINGS: dict[str, Any] = {
         "refine-min-area": "float >= 0", "refine-snap-deg": "float >= 0", "refine-separation-deg": "float >= 0",
         "refine-min-second": "float in [0, 1]", "refine-block": "float > 0", "refine-smooth": "float >= 0",
         "refine-pieces-points": "int >= 0 | null",
-        "rejoin": "bool",
+        "rejoin": "bool", "rejoin-across-frames": "float in [0, 1]",
         "ridges": {
             "ratio": "float >= 0", "low": "float > 0", "width": "float > 0", "gap": "float >= 0",
             "side": "float > 0", "min-side": "float >= 0", "chunk": "float > 0", "drift": "float >= 0",

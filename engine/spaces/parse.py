@@ -195,7 +195,8 @@ def _refined_plan(grid: Grid, p: SpaceSettings, sl: _Slicing, edges: list[Edge],
         source = np.full(plan.n_spaces, -1, dtype=np.int64)
         for sp_id, (k, _) in plan.sub_of.items():
             source[sp_id] = k
-        plan.regroup(rejoin_pieces(plan.cells, plan.edges, plan.labels, plan.sides, source, p.bin_width, p.rules))
+        plan.regroup(rejoin_pieces(plan.cells, plan.edges, plan.labels, plan.sides, source, p.bin_width, p.rules,
+                                   across=~plan.frames_agree(), across_ratio=p.rejoin_across_frames))
     return plan
 
 

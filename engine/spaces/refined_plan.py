@@ -53,6 +53,23 @@ class RefinedPlan:
     joined: dict[int, list[int]] = field(default_factory=dict)
     before: np.ndarray | None = None
     sub_before: dict[int, tuple[int, float]] = field(default_factory=dict)
+    #: The building frame's yaw (None: not known; every edge then counts as in its sides' frames).
+    frame_yaw: float | None = None
+
+    def frames_agree(self) -> np.ndarray:
+        """Per edge: whether each side's space was parsed in the frame of the edge (a face of the building's
+        frame between spaces of the building's frame, or a refinement's face between spaces of its frame)."""
+        if self.frame_yaw is None:
+            return np.ones(len(self.edges), dtype=bool)
+
+        def space_yaw(s: int) -> float | None:
+            if s < 0 or s not in self.sub_of:
+                return None
+            y = self.sub_of[s][1]
+            return None if y == self.frame_yaw else y
+
+        return np.array([all(int(s) < 0 or space_yaw(int(s)) == y for s in row)
+                         for row, y in zip(self.sides.tolist(), self.edge_yaw)], dtype=bool).reshape(-1)
 
     def regroup(self, group: np.ndarray) -> None:
         """Join spaces: ``group[s]`` is the space ``s`` joins (:func:`engine.spaces.rejoin.rejoin_pieces`); renumbered."""
@@ -87,7 +104,7 @@ class RefinedPlan:
         all_edges, rows, pieces = _building_edges(edges, old, num, frame, bin_width)
         out = cls(list(cells), all_edges, np.zeros(0, np.int64), owner, num.kept, [], [None] * len(cells),
                   [None] * len(all_edges), np.array(rows, dtype=np.int64).reshape(-1, 2), {}, {}, [], num.n_spaces,
-                  pieces=pieces)
+                  pieces=pieces, frame_yaw=None if frame is None else frame.yaw)
         lab = [num.new_id[old]]  # old -1 -> new_id[-1] = -1
         for k, r in enumerate(num.kept):
             lab += out._append(k, r, num.base[r.space], frame)

@@ -16,6 +16,12 @@ pieces of the same refinement (it split them on purpose).  The openness of
 two groups is their open faces' length over the smaller group's boundary,
 and the most open pair joins first while it is at least ``min_open_ratio``;
 faces to nearly unscanned spaces do not count (``min_scanned_density``).
+
+A face tested in another frame than one of its sides' spaces (a face of the building's frame beside a space a
+wing's refinement parsed in the wing's frame) reads open where the wing's wall runs slanted across the building's
+histograms (hr4101: a room and the wing's room beside it joined through 1.3 m of face, 0.065 of the room's
+boundary), while a sliver that a wing's refinement cut off a room of the block shares a long side with it (about
+half its boundary): such faces count only as a long side (``across_ratio``).
 """
 from __future__ import annotations
 
@@ -26,7 +32,8 @@ from engine.spaces.slicing import Box
 
 
 def rejoin_pieces(cells: list[Box], edges: list[Edge], labels: np.ndarray, sides: np.ndarray, source: np.ndarray,
-                  bin_width: float, rules: MergeRules | None = None) -> np.ndarray:
+                  bin_width: float, rules: MergeRules | None = None, across: np.ndarray | None = None,
+                  across_ratio: float = 0.0) -> np.ndarray:
     """New space of every space after rejoining refined pieces with their neighbours (a graph partition).
 
     Parameters
@@ -45,6 +52,9 @@ def rejoin_pieces(cells: list[Box], edges: list[Edge], labels: np.ndarray, sides
         Metres per bin.
     rules
         ``min_open_ratio`` and ``min_scanned_density``.
+    across, across_ratio
+        Per edge, whether it was tested in another frame than a side's space; such faces count toward a pair
+        only where they make at least ``across_ratio`` of the smaller group's boundary (see the module doc).
 
     Returns
     -------
@@ -78,6 +88,8 @@ def rejoin_pieces(cells: list[Box], edges: list[Edge], labels: np.ndarray, sides
     use[use] &= (source[sa[use]] >= 0) | (source[sb[use]] >= 0)  # only faces touching a refined piece
     use[use] &= sparse[sa[use]] == sparse[sb[use]]
     ea, eb, el = sa[use], sb[use], length[use]
+    ex = np.zeros(len(edges), dtype=bool) if across is None else np.asarray(across, dtype=bool).reshape(-1)
+    ex = ex[use]
     if not len(ea):
         return group
     # the refinements each group holds pieces of (two pieces of one refinement never join)
@@ -88,11 +100,8 @@ def rejoin_pieces(cells: list[Box], edges: list[Edge], labels: np.ndarray, sides
         if not cross.any():
             return group
         gbound = np.bincount(group, weights=boundary, minlength=n)
-        lo, hi = np.minimum(ga, gb)[cross], np.maximum(ga, gb)[cross]
-        keys, inv = np.unique(lo * n + hi, return_inverse=True)
-        face = np.bincount(inv.ravel(), weights=el[cross])
+        keys, ratio = _openness(ga[cross], gb[cross], el[cross], ex[cross], gbound, n, across_ratio)
         pa, pb = keys // n, keys % n
-        ratio = face / np.maximum(np.minimum(gbound[pa], gbound[pb]), 1e-12)
         allowed = np.array([not (holds[a] & holds[b]) for a, b in zip(pa.tolist(), pb.tolist())], dtype=bool)
         cand = np.flatnonzero(allowed & (ratio >= r.min_open_ratio))
         if not len(cand):
@@ -101,3 +110,16 @@ def rejoin_pieces(cells: list[Box], edges: list[Edge], labels: np.ndarray, sides
         a, b = int(pa[j]), int(pb[j])
         group[group == b] = a
         holds[a] |= holds[b]
+
+
+def _openness(ga: np.ndarray, gb: np.ndarray, length: np.ndarray, across: np.ndarray, gbound: np.ndarray, n: int,
+              across_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per pair of groups (key ``lo * n + hi``) with open faces between them: the faces' length over the smaller
+    group's boundary, the faces tested in another frame counted only where they make ``across_ratio`` of it."""
+    lo, hi = np.minimum(ga, gb), np.maximum(ga, gb)
+    keys, inv = np.unique(lo * n + hi, return_inverse=True)
+    inv = inv.ravel()
+    smaller = np.maximum(np.minimum(gbound[keys // n], gbound[keys % n]), 1e-12)
+    face = np.bincount(inv, weights=np.where(across, 0.0, length), minlength=len(keys))
+    face_x = np.bincount(inv, weights=np.where(across, length, 0.0), minlength=len(keys))
+    return keys, (face + np.where(face_x >= across_ratio * smaller, face_x, 0.0)) / smaller

@@ -59,6 +59,9 @@ class SpaceSettings:
     #: Refined pieces join their neighbours beyond the refined space through open faces
     #: (:mod:`engine.spaces.rejoin`).
     rejoin: bool = True
+    #: ... where a face tested in another frame than a side's space counts only when such faces make at least
+    #: this fraction of the smaller group's boundary (:func:`engine.spaces.rejoin.rejoin_pieces`).
+    rejoin_across_frames: float = 0.25
     #: In the refinement, a face without a divider between a side with a ceiling in the storey and a side
     #: without one (a stair shaft beside its lobby) is divided, and lines where the ceiling changes height cut
     #: and divide like ridge lines: :mod:`engine.spaces.ceilings`.

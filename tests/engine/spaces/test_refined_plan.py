@@ -80,3 +80,16 @@ def test_the_pieces_of_a_face_between_two_refined_spaces_are_listed_for_testing_
     # space that was not refined, a piece's own stretch misled the test (an outer wall beside unscanned
     # ground that a refined piece had stretched over: h400-2storeys-yaw-20 0.983 -> 0.943)
     assert len(plan.edges) == 6 and sorted(plan.pieces) == [0, 1]
+
+
+def test_faces_tested_in_another_frame_than_a_side_s_do_not_agree():
+    """The building face (the building's frame) beside the spaces of a refinement parsed in a wing's frame does
+    not agree with their frame; the refinement's own face between them does; in the building's frame all agree."""
+    plan = _plan()
+    assert plan.frames_agree().tolist() == [True] * len(plan.edges)
+    cells = [_box(0, 2, 0, 13), _box(2, 7, 0, 13)]
+    part = Part(0.5, cells=[_box(2, 7, 0, 8), _box(2, 7, 8, 13)], labels=np.array([0, 1]),
+                edges=[Edge(0, 1, 0, 1, 800, (200, 700), divider={"kind": "peak-gap-peak"})])
+    wing = RefinedPlan.build(cells, [Edge(0, 1, 0, 0, 200, (0, 1300))], np.array([0, 1]),
+                             [Refinement(1, 0, parts=[part], points=2000)], FRAME, BW)
+    assert wing.frames_agree().tolist() == [False, False, True]

@@ -70,3 +70,17 @@ def test_a_small_opening_or_an_unscanned_piece_does_not_join():
     cells[2] = _cell(0, 2, 10, 13, count=1)
     group = rejoin_pieces(cells, edges, labels, sides, np.array([-1, 0, 0]), BW, MergeRules())
     assert group.tolist() == [0, 1, 2]
+
+
+def test_a_face_tested_in_another_frame_counts_only_as_a_long_side():
+    """A face tested in another frame than a side's joins only where it makes ``across_ratio`` of the smaller
+    group's boundary: the hallway's end (2 x 3 m, boundary 10 m) shares 2 m with the hallway, 0.2 of it."""
+    cells, edges, labels, sides = _plan()
+    src, across = np.array([-1, 0, 0]), np.array([True, False])
+    assert rejoin_pieces(cells, edges, labels, sides, src, BW, MergeRules(), across=across,
+                         across_ratio=0.25).tolist() == [0, 1, 2]
+    assert rejoin_pieces(cells, edges, labels, sides, src, BW, MergeRules(), across=across,
+                         across_ratio=0.15).tolist() == [0, 1, 0]
+    # the same face tested in its sides' frame joins at any across_ratio
+    assert rejoin_pieces(cells, edges, labels, sides, src, BW, MergeRules(), across=np.array([False, False]),
+                         across_ratio=1.0).tolist() == [0, 1, 0]
