@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from engine.detection.sparse import point_median
 from tiles.classes import ELEMENT_CLASSES
 
 #: Bin (metres) of the slab's profile along each horizontal axis.
@@ -29,8 +30,8 @@ MIN_POINTS = 100
 def typical_count(h: np.ndarray) -> float:
     """The count of the bin that holds the median point of the histogram ``h``: the density of the bulk of the
     points, however many sparse bins a few stray points occupy."""
-    c = np.sort(h[h > 0])
-    return float(c[np.searchsorted(np.cumsum(c), 0.5 * c.sum())])
+    c = np.asarray(h)[np.asarray(h) > 0]
+    return point_median(c, c)
 
 
 def dense_span(values: np.ndarray, lo: float, fraction: float) -> tuple[float, float]:

@@ -35,15 +35,21 @@ def space_densities(doc: Mapping[str, Any]) -> dict[int, tuple[int, float]]:
     return out
 
 
-def typical_density(densities: Mapping[int, tuple[int, float]]) -> float:
-    """The point-weighted median density: the density of the space holding the median point (NaN: no points)."""
-    counts = np.array([n for n, _ in densities.values()], dtype=np.float64)
-    dens = np.array([d for _, d in densities.values()], dtype=np.float64)
+def point_median(values: np.ndarray, counts: np.ndarray) -> float:
+    """The value of the item (a space, a histogram bin) that holds the median point, items ordered by value and
+    weighted by their point ``counts`` (NaN: no points)."""
+    values, counts = np.asarray(values, dtype=np.float64), np.asarray(counts, dtype=np.float64)
     if counts.sum() <= 0:
         return float("nan")
-    order = np.argsort(dens, kind="stable")
+    order = np.argsort(values, kind="stable")
     cum = np.cumsum(counts[order])
-    return float(dens[order][np.searchsorted(cum, 0.5 * cum[-1])])
+    return float(values[order][np.searchsorted(cum, 0.5 * cum[-1])])
+
+
+def typical_density(densities: Mapping[int, tuple[int, float]]) -> float:
+    """The point-weighted median density: the density of the space holding the median point (NaN: no points)."""
+    return point_median(np.array([d for _, d in densities.values()], dtype=np.float64),
+                        np.array([n for n, _ in densities.values()], dtype=np.float64))
 
 
 def sparse_spaces(doc: Mapping[str, Any] | None, ratio: float) -> dict[int, tuple[int, float]]:
