@@ -8,6 +8,7 @@ Why and how: ``docs/design/spaces.md`` (ridge dividers).
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,7 +20,7 @@ from scipy import ndimage
 class RidgeSettings:
     """Physical parameters (metres) and ratios of the ridge search; see the module docstring."""
 
-    #: Ridge density in the low slice over the chunk's room level (0: no ridges).
+    #: Ridge density in the low slice over the room level (0: no ridges).
     ratio: float = 1.25
     #: Height of the low slice: the lowest part of the upper band (metres).
     low: float = 0.1
@@ -102,6 +103,38 @@ def _runs(mask: np.ndarray, max_gap: int) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
+def _group_sums(h: np.ndarray, coarse: int) -> np.ndarray:
+    """Points per group of ``coarse`` normal bins and chunk (whole groups only)."""
+    nc = h.shape[0] // coarse
+    return h[:nc * coarse].reshape(nc, coarse, h.shape[1]).sum(axis=1)
+
+
+def chunk_level(hist2d: np.ndarray, coarse: int) -> np.ndarray:
+    """Per chunk: the median density per bin of its occupied ``coarse``-bin groups (0: none occupied)."""
+    sums = _group_sums(np.asarray(hist2d, dtype=np.float64), coarse)
+    level = np.zeros(sums.shape[1])
+    for j in np.flatnonzero((sums > 0).any(axis=0)):
+        level[j] = np.median(sums[sums[:, j] > 0, j]) / coarse
+    return level
+
+
+def local_level(hist2d: np.ndarray, coarse: int, groups: int, offset: int = 0) -> np.ndarray:
+    """Per (normal bin ``i``, chunk): the median density per bin of the occupied groups among the ``groups``
+    ``coarse``-bin groups on each side of the one holding ``i + offset`` (left out: a wall stands there); 0
+    where none is occupied.  Between rooms scanned at densities ``a`` and ``b``: near ``(a + b) / 2``."""
+    sums = _group_sums(np.asarray(hist2d, dtype=np.float64), coarse)
+    n, (nc, k) = len(hist2d), sums.shape
+    if nc == 0:
+        return np.zeros((n, k))
+    r = max(1, int(groups))
+    vals = np.pad(np.where(sums > 0, sums, np.nan), ((r, r), (0, 0)), constant_values=np.nan)
+    win = np.lib.stride_tricks.sliding_window_view(vals, 2 * r + 1, axis=0)  # (nc, k, 2r + 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows: no occupied group
+        med = np.nan_to_num(np.nanmedian(np.delete(win, r, axis=-1), axis=-1), nan=0.0) / coarse
+    return med[np.clip((np.arange(n) + offset) // coarse, 0, nc - 1)]
+
+
 def ridge_mask(hist2d: np.ndarray, low2d: np.ndarray, p: RidgeSettings, bin_width: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """Per (normal bin, chunk) of an upper-band 2-D histogram: ridge found there, and its density ratio.
@@ -116,13 +149,12 @@ def ridge_mask(hist2d: np.ndarray, low2d: np.ndarray, p: RidgeSettings, bin_widt
     g = max(0, int(round(p.gap / bin_width)))
     s = max(1, int(round(p.side / bin_width)))
     lb = max(1, int(round(p.level_bin / bin_width)))
-    # room level per chunk: median of the occupied coarse bins (the ceiling's density), per fine bin
-    nc = n // lb
-    coarse = h[:nc * lb].reshape(nc, lb, k).sum(axis=1) if nc else np.zeros((0, k))
-    occ = coarse > 0
-    level = np.zeros(k)
-    for j in np.flatnonzero(occ.any(axis=0)):
-        level[j] = np.median(coarse[occ[:, j], j]) / lb
+    # room level: the ceiling's density, the median of the occupied coarse bins over the chunk.  A side is
+    # scanned when it holds min_side of the level beside the position (the median over the side windows) or
+    # of the chunk's, whichever is lower: the chunk's is the level of the room that fills most of it, too
+    # high beside a room scanned at a third of its density.
+    level = chunk_level(h, lb)[None, :]
+    beside = np.minimum(local_level(h, lb, max(1, int(round(s / lb))), w // 2), level)
     cs = np.vstack([np.zeros((1, k)), np.cumsum(h, axis=0)])
     cl = np.vstack([np.zeros((1, k)), np.cumsum(np.asarray(low2d, dtype=np.float64), axis=0)])
     i = np.arange(n)
@@ -137,8 +169,8 @@ def ridge_mask(hist2d: np.ndarray, low2d: np.ndarray, p: RidgeSettings, bin_widt
     fits = ((i - g - s >= 0) & (i + w + g + s <= n))[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(level > 0, ridge / level, 0.0)
-    mask = (fits & (level > 0) & (ratio >= p.ratio) & (left >= p.min_side * level)
-            & (right >= p.min_side * level))
+    mask = (fits & (level > 0) & (ratio >= p.ratio) & (left >= p.min_side * beside)
+            & (right >= p.min_side * beside))
     return mask, ratio
 
 

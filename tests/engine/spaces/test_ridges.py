@@ -5,7 +5,16 @@ import numpy as np
 
 from engine.spaces.dividers import DividerSettings, detect_dividers
 from engine.spaces.merging import Edge, ridge_faces
-from engine.spaces.ridges import Occupancy, RidgeLine, RidgeSettings, box_cuts, face_pieces, find_ridges, space_ridges
+from engine.spaces.ridges import (
+    Occupancy,
+    RidgeLine,
+    RidgeSettings,
+    box_cuts,
+    face_pieces,
+    find_ridges,
+    local_level,
+    space_ridges,
+)
 from engine.spaces.slicing import split_histogram
 from tests.engine.handmade import BAND, BW, ZB
 from tests.engine.handmade import box_points as _surface
@@ -165,3 +174,38 @@ def test_ridge_faces_splits_open_edges_only():
     assert [(e.overlap, None if e.divider is None else e.divider["kind"]) for e in got] == [
         ((0, 100), None), ((100, 500), "ridge"), ((500, 700), None), ((0, 700), "peak-gap-peak")]
     assert ridge_faces([e_open], [], P, BW) == [e_open]
+
+
+def test_a_wall_between_a_dense_room_and_a_sparse_one_is_a_ridge_line():
+    # each room scanned from its own stations: a wide room at 1000 points per m2 and a narrow one beside it at
+    # 250 (both faces of the wall at their room's density).  The whole chunk's level is the wide room's
+    # ceiling, against which the narrow room's side looked unscanned; the level beside the wall lies between.
+    rng = np.random.default_rng(5)
+    wide = _rooms(rng, width=12.0, per_m2=1000.0)
+    narrow = _rooms(rng, width=4.0, per_m2=250.0)
+    narrow = narrow[narrow[:, 0] > 0.01]  # its wall at u = 0 is the wide room's
+    narrow[:, 0] += 12.0
+    n = int(6.0 * 3.0)
+    wall = np.concatenate([_surface(rng, 1000 * n, (11.99, 12.0), (0, 6.0), (0, 3.0)),
+                           _surface(rng, 250 * n, (12.015, 12.025), (0, 6.0), (0, 3.0))])
+    got = _at_u(_ridges(np.concatenate([wide, narrow, wall])), 12.0)
+    assert len(got) == 1 and got[0].covered(0, int(6.0 / BW)) >= 0.9 * 6.0 / BW
+    # the level beside a position lies between the two rooms' ceilings
+    bu, bv, bz = _bins(np.concatenate([wide, narrow]))
+    up = bz >= BAND
+    h = np.bincount(bu[up] - bu[up].min())[:, None].astype(float)
+    at = int(round(12.0 / BW)) - bu[up].min()
+    level = local_level(h, 10, 5)[at, 0]
+    dense, sparse = np.median(h[at - 60:at - 10]), np.median(h[at + 10:at + 60])
+    assert sparse < level < dense
+
+
+def test_local_level_leaves_out_the_wall_and_empty_groups():
+    h = np.zeros((200, 1))
+    h[:100] = 4.0  # a room ...
+    h[100:110] = 50.0  # ... its wall ...
+    # ... and nothing beyond (an exterior wall): the level beside the wall is the room's, not the wall's
+    got = local_level(h, 10, 5)
+    assert got[105, 0] == 4.0
+    assert got[150, 0] == 50.0  # 4 m beyond: the wall's group is the only one occupied near
+    assert local_level(np.zeros((200, 1)), 10, 5).max() == 0.0
