@@ -71,7 +71,7 @@ def without_sparse(refs: list[SpaceRef], doc: dict | None, ratio: float) -> list
 
 
 def _yaw_task(ref: SpaceRef, store, space_array: str, min_points: int) -> float:
-    xyz = load_space(store, ref, space_array).xyz
+    xyz = load_space(store, ref, space_array, colour=False).xyz  # the yaw needs no colour
     return manhattan_yaw(xyz) if len(xyz) >= min_points else float("nan")  # too few points to detect in
 
 

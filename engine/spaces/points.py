@@ -74,9 +74,11 @@ def color_scale(store) -> float | None:
     return 255.0 if store.meta.color_depth == 8 else 65535.0
 
 
-def load_space(store, ref: SpaceRef, space_array: str = "space_id", *, truth: bool = False) -> SpacePoints:
-    """Read one space's points from the tiles it touches (inside a task)."""
-    has_color = color_scale(store) is not None
+def load_space(store, ref: SpaceRef, space_array: str = "space_id", *, truth: bool = False,
+               colour: bool = True) -> SpacePoints:
+    """Read one space's points from the tiles it touches (inside a task); ``colour=False``: coordinates only
+    (``rgb`` None), the colour columns not read."""
+    has_color = colour and color_scale(store) is not None
     cols = (list(COLOR_COLUMNS) if has_color else []) + (["gt_class", "gt_instance"] if truth else [])
     xyz, rgb, gcls, ginst = [], [], [], []
     for tile in ref.tiles:
@@ -87,7 +89,7 @@ def load_space(store, ref: SpaceRef, space_array: str = "space_id", *, truth: bo
         # only the span from its first to its last row is read and decoded
         start, stop = int(sel[0]), int(sel[-1]) + 1
         sel -= start
-        data = store.read(tile, cols, start, stop)
+        data = store.read(tile, cols, start, stop) if cols else {}
         xyz.append(store.xyz(tile, start=start, stop=stop)[sel])
         if has_color:
             rgb.append(np.stack([data[c][sel] for c in COLOR_COLUMNS], axis=1))

@@ -65,3 +65,13 @@ def test_load_space_equals_selecting_from_whole_tiles_and_reads_only_the_span():
     assert span[1] - span[0] < 0.5 * len(store.tiles["a"]["space_id"])
     for _tile, cols, start, stop in store.reads:
         assert (start, stop) == ((None, None) if cols == ("space_id",) else span)
+
+
+def test_load_space_without_colour_reads_no_colour_column():
+    store = _Store(np.random.default_rng(1))
+    ref = SpaceRef(2, ["a", "b"], 0)
+    full = load_space(store, ref)
+    store.reads.clear()
+    bare = load_space(store, ref, colour=False)
+    assert np.array_equal(bare.xyz, full.xyz) and bare.rgb is None and full.rgb is not None
+    assert not [c for _tile, cols, _a, _b in store.reads for c in cols if c in ("red", "green", "blue")]
