@@ -106,7 +106,7 @@ SETTINGS: dict[str, Any] = {
         "face-classes": "classes", "face-grow": "float >= 0",
         "side-classes": "classes", "side-reach": "float > 0", "side-floor": "float",
         "relief-classes": "classes", "relief-ratio": "float > 0", "relief-gap": "float >= 0",
-        "cut": "classes -> float", "orientation-tolerance": "float in [0, 45]",
+        "cut": "classes -> float", "orientation-tolerance": "float in [0, 45]", "rescore-clip": "float >= 0",
         "colour-free-model": "one of auto, always, never",
         "train": {
             "c": "float > 0", "rounds": "int >= 0", "max-stride": "float > 0",

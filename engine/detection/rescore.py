@@ -99,20 +99,24 @@ class Rescorer:
         if np.any(self.scale <= 0):
             raise ValueError("re-ranking scales must be positive")
 
-    def decision(self, class_code: np.ndarray, feats: np.ndarray) -> np.ndarray:
-        """Log-odds ``(n,)`` of detections of classes ``class_code`` from their features ``(n, F)``."""
+    def decision(self, class_code: np.ndarray, feats: np.ndarray, clip: float = 0.0) -> np.ndarray:
+        """Log-odds ``(n,)`` of detections of classes ``class_code`` from their features ``(n, F)``; ``clip`` > 0:
+        each standardised feature held within ``[-clip, clip]``."""
         c = np.asarray(class_code, dtype=np.int64)
         z = (np.asarray(feats, dtype=np.float64) - self.mean[c]) / self.scale[c]
+        if clip > 0:
+            np.clip(z, -clip, clip, out=z)
         return np.einsum("nf,nf->n", z, self.coef[c]) + self.bias[c]
 
     def apply(self, score: np.ndarray, class_code: np.ndarray, lo: np.ndarray, hi: np.ndarray, points_in,
-              extent: np.ndarray) -> np.ndarray:
-        """The scores with those of the enabled classes' detections replaced by their log-odds."""
+              extent: np.ndarray, clip: float = 0.0) -> np.ndarray:
+        """The scores with those of the enabled classes' detections replaced by their log-odds (``clip``: see
+        :meth:`decision`)."""
         score = np.asarray(score, dtype=np.float64).copy()
         sel = np.nonzero(self.enabled[np.asarray(class_code, dtype=np.int64)])[0]
         if len(sel):
             f = rescore_features(score[sel], lo[sel], hi[sel], points_in, extent)
-            score[sel] = self.decision(np.asarray(class_code)[sel], f)
+            score[sel] = self.decision(np.asarray(class_code)[sel], f, clip)
         return score
 
     def to_arrays(self) -> dict[str, np.ndarray]:

@@ -69,6 +69,7 @@ class DetectionSettings:
     relief_gap: float = 0.05
     cut: dict[str, float] = field(default_factory=dict)
     orientation_tolerance: float = 1.0
+    rescore_clip: float = 5.0
 
     def __post_init__(self) -> None:
         if not 0 < self.stride <= 1:
@@ -107,6 +108,8 @@ class DetectionSettings:
             raise ValueError(f"relief-ratio must be > 0 and relief-gap >= 0, got {self.relief_ratio}, {self.relief_gap}")
         if self.face_grow < 0:
             raise ValueError(f"face-grow must be >= 0, got {self.face_grow}")
+        if not np.isfinite(self.rescore_clip) or self.rescore_clip < 0:
+            raise ValueError(f"rescore-clip must be a finite number >= 0 (0: off), got {self.rescore_clip}")
         if not 0 <= self.orientation_tolerance <= 45:
             raise ValueError(f"orientation-tolerance must be in [0, 45] degrees, got {self.orientation_tolerance}")
         unknown = set(self.cut) - set(ELEMENT_CLASSES)

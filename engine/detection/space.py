@@ -104,7 +104,7 @@ def detect_in_volume(vol: SpaceVolume, model: Model, settings: DetectionSettings
             model.boxfit.apply(lo_m, hi_m, cls_all, sample, np.asarray(vol.frame.extent, float))
     if settings.refine and index is not None and model.rescorer is not None and settings.rescore:
         score = model.rescorer.apply(score, cls_all, lo_m, hi_m, sample,
-                                     np.asarray(vol.frame.extent, float))
+                                     np.asarray(vol.frame.extent, float), settings.rescore_clip)
     if settings.cut:  # the kept set's cut per class: a positive score still means kept
         score = score - settings.cut_array()[cls_all]
     keep, sure = side_walls(lo, hi, score, cls_all, candidate, grid, settings)

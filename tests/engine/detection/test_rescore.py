@@ -93,6 +93,21 @@ def test_apply_rescores_only_enabled_classes():
         rs.Rescorer(coef[:, :3], coef[:, :3], coef[:, :3], np.zeros(12), enabled)
 
 
+def test_clip_holds_a_feature_that_training_barely_saw_varying():
+    # a feature nearly constant in training (scale 1e-4) read on an unfamiliar building: 0.1 away is 1,000 sigmas
+    f = rs.N_FEATURES
+    scale, coef = np.ones((12, f)), np.zeros((12, f))
+    scale[:, 1] = 1e-4
+    coef[4, :2] = [1.0, 0.5]
+    fit = rs.Rescorer(np.zeros((12, f)), scale, coef, np.zeros(12), np.ones(12, bool))
+    feats = np.zeros((2, f))
+    feats[:, :2] = [[0.5, 0.1], [0.5, 0.0]]
+    np.testing.assert_allclose(fit.decision(np.array([4, 4]), feats), [500.5, 0.5])
+    np.testing.assert_allclose(fit.decision(np.array([4, 4]), feats, clip=10.0), [5.5, 0.5])  # 0.5 + 0.5 * 10
+    np.testing.assert_allclose(fit.decision(np.array([4, 4]), feats * 0.0001, clip=10.0),
+                               fit.decision(np.array([4, 4]), feats * 0.0001))  # within the clip: unchanged
+
+
 def test_model_with_rescorer_round_trips_and_older_models_have_none(tmp_path):
     from engine.detection.model import load_model
     from tests.engine.detection.test_model import _model
