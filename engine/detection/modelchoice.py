@@ -2,10 +2,11 @@
 
 The shipped default model reads colour (the ``color`` and ``context_color`` feature groups); on a cloud
 without colour those columns are zero or one constant, values it never saw in training.  The colour-free
-model (``engine/models/nocolour``, ``make model``: the same buildings and seeds with ``train --no-colour``)
-has both groups disabled, so nothing in it reads a point's colour.  :func:`choose_model` picks it from the
-tile store's metadata after ingest (:attr:`tiles.schema.StoreMeta.color_constant`): the store has no colour
-dimensions, or every point has the same colour.  The setting ``buildingparser.detection.colour-free-model``:
+model (``engine/models/nocolour``, ``make model``: the same buildings and seeds, and two with the appearance
+difficulties of real scans, with ``train --no-colour``) has both groups disabled, so nothing in it reads a
+point's colour.  :func:`choose_model` picks it from the tile store's metadata after ingest
+(:attr:`tiles.schema.StoreMeta.color_constant`): the store has no colour dimensions, or every point has the
+same colour.  The setting ``buildingparser.detection.colour-free-model``:
 ``auto`` (that rule), ``always``, ``never``; a model given by the user (``--model``) always wins.
 """
 from __future__ import annotations
