@@ -9,15 +9,27 @@ import pytest
 
 from engine.detection.model import default_model_path
 from engine.detection.modelchoice import colour_free_model_path
+from engine.synth.hard.hardness import NAMES
 
 MAKEFILE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "Makefile")
 
 
-def _variables() -> dict[str, str]:
+def _makefile() -> str:
     if not os.path.exists(MAKEFILE):
         pytest.skip(f"{MAKEFILE} is absent (an installed package, not a checkout)")
     with open(MAKEFILE) as f:
-        return dict(re.findall(r"^([A-Z_]+) := (.*)$", f.read(), flags=re.M))
+        return f.read()
+
+
+def _variables() -> dict[str, str]:
+    return dict(re.findall(r"^([A-Z_]+) := (.*)$", _makefile(), flags=re.M))
+
+
+def _synthetic(model: str) -> dict:
+    """The generated buildings the recipe's ``train ... --model engine/models/<model>`` asks for."""
+    n, seed, area = re.search(r"--synthetic (\d+) --seed (\d+) --area (\d+) [^\n]*--model engine/models/" + model,
+                              _makefile()).groups()
+    return {"buildings": int(n), "first_seed": int(seed), "area_m2": float(area)}
 
 
 def _provenance(stem: str) -> dict:
@@ -31,7 +43,7 @@ def test_the_default_model_is_trained_on_the_recipes_clean_buildings():
     prov = _provenance(default_model_path())
     stores = [d for d in prov["data"] if not d.startswith("synthetic")]
     assert stores == [f"{data}/b{s}.zarr" for s in v["MODEL_SEEDS"].split()]
-    assert prov["synthetic"] == {"buildings": 20, "first_seed": 1000, "area_m2": 80.0}
+    assert prov["synthetic"] == _synthetic("default")
 
 
 def test_the_colour_free_model_is_trained_on_the_clean_and_the_hard_buildings():
@@ -43,9 +55,8 @@ def test_the_colour_free_model_is_trained_on_the_clean_and_the_hard_buildings():
     assert hard, "the colour-free model's recipe has hard buildings"
     assert stores == [f"{data}/b{s}.zarr" for s in v["MODEL_SEEDS"].split()] + [f"{data}/h{s}.zarr" for s in hard]
     assert prov["ablation"] == "no_color"
+    assert prov["synthetic"] == _synthetic("nocolour")
     # the difficulties are the appearance ones: none that turns an element out of the building's axes
     difficulties = v["HARD_TRAINING"].split(",")
     assert not {"wing", "oblique", "stairs"} & set(difficulties)
-    from engine.synth.hard.hardness import NAMES
-
     assert set(difficulties) <= set(NAMES)
